@@ -1,0 +1,112 @@
+#include "harness/experiment.h"
+
+#include <chrono>
+#include <cstdio>
+
+#include "harness/accuracy.h"
+#include "harness/cache_columns.h"
+#include "harness/trace_runner.h"
+#include "traversal/registry.h"
+
+namespace tb {
+
+std::string spec_key(const WorkloadSpec& s) {
+  return s.name() + "@" + std::to_string(s.view) + ":" + std::to_string(s.width) + "x" + std::to_string(s.height) +
+         ":" + std::to_string(s.seed);
+}
+
+Bench::Bench(Scene scene) : scene_(std::move(scene)), cache_(scene_), reference_(make_scheme("reference")) {
+  reference_->prepare(scene_, cache_);
+}
+
+const RayBatch& Bench::rays(const WorkloadSpec& spec) {
+  const std::string key = spec_key(spec);
+  auto it = batches_.find(key);
+  if (it == batches_.end()) it = batches_.emplace(key, generate_workload(scene_, spec, *reference_)).first;
+  return it->second;
+}
+
+const std::vector<Hit>& Bench::reference_hits(const WorkloadSpec& spec, int threads) {
+  const std::string key = spec_key(spec);
+  auto it = ref_hits_.find(key);
+  if (it == ref_hits_.end()) {
+    const RayBatch& b = rays(spec);
+    std::vector<Hit> hits(b.size());
+    trace_batch(*reference_, b, hits, threads);
+    it = ref_hits_.emplace(key, std::move(hits)).first;
+  }
+  return it->second;
+}
+
+Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt) {
+  const RayBatch& batch = bench.rays(spec);
+  const std::vector<Hit>& ref = bench.reference_hits(spec, std::max(2, opt.threads));
+  std::vector<Hit> hits(batch.size());
+  const ThroughputStats tp = measure(scheme, batch, hits, opt.threads, opt.reps);
+  const Accuracy acc = compare_hits(hits, ref);
+  Record r;
+  r.set("scene", bench.scene().name)
+      .set("triangles", uint64_t(bench.scene().num_triangles()))
+      .set("workload", spec.name())
+      .set("scheme", std::string(scheme.name()))
+      .set("kernel", std::string(kernel_name(opt.scheme_config.kernel)))
+      .set("view", opt.view + 1)
+      .set("rays", uint64_t(batch.size()))
+      .set("threads", opt.threads)
+      .set("reps", opt.reps)
+      .set("mrays_median", tp.mrays_median)
+      .set("mrays_min", tp.mrays_min)
+      .set("mrays_max", tp.mrays_max)
+      .set("mismatch_rate", acc.mismatch_rate())
+      .set("false_miss", acc.false_miss)
+      .set("false_hit", acc.false_hit);
+  if (opt.stats) {
+    TraversalCounts c;
+    Probe probe;
+    probe.counts = &c;
+    enable_ftz_daz();
+    scheme.trace(batch, PacketRange::all(batch), hits, probe);
+    const double n = std::max<double>(1, double(batch.size()));
+    r.set("nodes_per_ray", double(c.node_ray_visits) / n)
+        .set("leaves_per_ray", double(c.leaf_ray_visits) / n)
+        .set("tris_per_ray", double(c.tri_tests) / n)
+        .set("rays_per_node", c.node_visits ? double(c.node_ray_visits) / double(c.node_visits) : 0.0)
+        .set("rays_per_leaf", c.leaf_visits ? double(c.leaf_ray_visits) / double(c.leaf_visits) : 0.0);
+  }
+  if (opt.cache) add_cache_columns(r, scheme, batch, hits, opt.cache_config, opt.cache_policy);
+  return r;
+}
+
+std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
+  std::vector<Record> out;
+  std::vector<std::unique_ptr<Traverser>> schemes;
+  std::vector<double> prepare_ms;
+  for (const auto& name : opt.schemes) {
+    auto t = make_scheme(name, opt.scheme_config);
+    const auto t0 = std::chrono::steady_clock::now();
+    t->prepare(bench.scene(), bench.cache());
+    prepare_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    schemes.push_back(std::move(t));
+  }
+  const size_t total = opt.workloads.size() * schemes.size();
+  size_t done = 0;
+  for (const auto& w : opt.workloads) {
+    WorkloadSpec spec = parse_workload(w);
+    spec.width = opt.width;
+    spec.height = opt.height;
+    spec.view = opt.view;
+    spec.seed = opt.seed;
+    for (size_t s = 0; s < schemes.size(); ++s) {
+      Record r = measure_cell(bench, spec, *schemes[s], opt);
+      r.set("prepare_ms", prepare_ms[s]);
+      if (opt.progress)
+        std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %8s Mrays/s  mismatch %s\n", ++done, total,
+                     schemes[s]->name().data(), spec.name().c_str(), r.get("mrays_median")->c_str(),
+                     r.get("mismatch_rate")->c_str());
+      out.push_back(std::move(r));
+    }
+  }
+  return out;
+}
+
+}  // namespace tb

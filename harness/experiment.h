@@ -1,0 +1,56 @@
+// The `travbench run` sweep: for each workload and scheme, trace the same rays `reps` times,
+// compare with the reference, optionally count and cache-simulate, one Record per cell.
+#pragma once
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "harness/records.h"
+#include "traversal/traverser.h"
+#include "workloads/workload.h"
+
+namespace tb {
+
+struct RunOptions {
+  std::vector<std::string> schemes;
+  std::vector<std::string> workloads;
+  int threads = 1;
+  int reps = 5;
+  bool stats = false;
+  bool cache = false;
+  std::string cache_config = "l1=32K:8,l2=256K:8,l3=2M:16";
+  std::string cache_policy = "plru";
+  uint32_t width = 512, height = 512, view = 0;
+  uint64_t seed = 1;
+  SchemeConfig scheme_config;
+  bool progress = true;
+};
+
+// A scene with its structure cache, reference and generated workloads: what several tables share.
+class Bench {
+ public:
+  explicit Bench(Scene scene);
+  const Scene& scene() const { return scene_; }
+  StructureCache& cache() { return cache_; }
+  const Traverser& reference() const { return *reference_; }
+  // Generates (once) the rays of a workload and their reference hits.
+  const RayBatch& rays(const WorkloadSpec& spec);
+  const std::vector<Hit>& reference_hits(const WorkloadSpec& spec, int threads = 2);
+
+ private:
+  Scene scene_;
+  StructureCache cache_;
+  std::unique_ptr<Traverser> reference_;
+  std::map<std::string, RayBatch> batches_;
+  std::map<std::string, std::vector<Hit>> ref_hits_;
+};
+
+// Key of a workload spec including the view, size and seed.
+std::string spec_key(const WorkloadSpec& s);
+
+// Measures one (workload, scheme) cell: throughput, accuracy, and counters/cache on request.
+Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt);
+
+std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt);
+
+}  // namespace tb

@@ -1,0 +1,34 @@
+// Tidy result rows: one record per measured cell, columns in first-seen order, written as CSV
+// with a provenance sidecar JSON (machine, compiler, flags, Embree version, git revision, date).
+#pragma once
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace tb {
+
+class Record {
+ public:
+  Record& set(const std::string& key, const std::string& value);
+  Record& set(const std::string& key, const char* value) { return set(key, std::string(value)); }
+  Record& set(const std::string& key, double value);
+  Record& set(const std::string& key, uint64_t value) { return set(key, std::to_string(value)); }
+  Record& set(const std::string& key, int value) { return set(key, std::to_string(value)); }
+  Record& set(const std::string& key, uint32_t value) { return set(key, std::to_string(value)); }
+  const std::string* get(const std::string& key) const;
+  const std::vector<std::pair<std::string, std::string>>& fields() const { return fields_; }
+
+ private:
+  std::vector<std::pair<std::string, std::string>> fields_;
+};
+
+// Writes `records` to `path` (CSV, RFC 4180 quoting) and `path` with .json for .csv (the
+// provenance sidecar, `extra` merged into it). Throws InputError when the file cannot be written.
+void write_csv(const std::string& path, const std::vector<Record>& records, const nlohmann::json& extra = {});
+nlohmann::json provenance();
+// Prints records as an aligned text table (the terminal view of a CSV).
+void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out);
+
+}  // namespace tb

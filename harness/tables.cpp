@@ -1,0 +1,109 @@
+#include "harness/tables.h"
+
+#include <cstdio>
+#include <functional>
+#include <map>
+
+#include "harness/accuracy.h"
+#include "structures/builtin_scenes.h"
+#include "traversal/registry.h"
+#include "workloads/hard_cases.h"
+
+namespace tb {
+namespace {
+
+std::vector<std::string> default_schemes(const TableOptions& opt) {
+  if (!opt.run.schemes.empty()) return opt.run.schemes;
+  std::vector<std::string> all;
+  for (const auto& s : schemes())
+    if (s.name != "reference") all.push_back(s.name);
+  return all;
+}
+
+// A scheme variant of the accuracy table: a kernel for our schemes, robust or fast mode for Embree.
+struct Variant {
+  std::string label;
+  SchemeConfig config;
+};
+
+std::vector<Variant> variants_of(const SchemeInfo& info, const SchemeConfig& base) {
+  std::vector<Variant> v;
+  if (info.kernels) {
+    for (TriKernel k : kAllTriKernels) {
+      SchemeConfig c = base;
+      c.kernel = k;
+      v.push_back({std::string(kernel_name(k)), c});
+    }
+  } else if (info.name.rfind("embree", 0) == 0) {
+    for (int robust : {1, 0}) {
+      SchemeConfig c = base;
+      c.params["robust"] = std::to_string(robust);
+      v.push_back({robust ? "embree_robust" : "embree_default", c});
+    }
+  }
+  return v;
+}
+
+// Speed vs error (issue "Accuracy"): every scheme x kernel on ordinary and hard workloads, on the
+// scene and on copies translated by ~1e5 and ~1e6 (the thesis-era failure mode of float kernels).
+int accuracy_table(const TableOptions& opt) {
+  const std::string base = opt.scene.empty() ? "sphere" : opt.scene;
+  const std::vector<std::string> scenes = {base, base + "@148376,1234,-223423", base + "@1483760,12340,-2234230"};
+  std::vector<std::string> workloads = {"primary", "rnd", "rnd2", "bounce:2", "shadow"};
+  for (const auto& h : hard_case_names()) workloads.push_back(h);
+  std::vector<Record> records;
+  for (const auto& scene_name : scenes) {
+    Bench bench(load_scene(scene_name));
+    for (const auto& scheme : default_schemes(opt)) {
+      const SchemeInfo& info = find_scheme(scheme);
+      for (const Variant& var : variants_of(info, opt.run.scheme_config)) {
+        auto t = info.make(var.config);
+        t->prepare(bench.scene(), bench.cache());
+        for (const auto& w : workloads) {
+          WorkloadSpec spec = parse_workload(w);
+          spec.width = opt.run.width, spec.height = opt.run.height, spec.seed = opt.run.seed;
+          Record r = measure_cell(bench, spec, *t, opt.run);
+          r.set("kernel", var.label).set("offset", scene_name == base ? "0" : scene_name.substr(base.size() + 1));
+          r.set("must_hit", hard_case_must_hit(w) ? "yes" : "no");
+          if (opt.run.progress)
+            std::fprintf(stderr, "%-40s %-16s %-14s %-14s %8s Mrays/s  mismatch %s  leaks %s\n",
+                         bench.scene().name.c_str(), scheme.c_str(), var.label.c_str(), w.c_str(),
+                         r.get("mrays_median")->c_str(), r.get("mismatch_rate")->c_str(),
+                         r.get("false_miss")->c_str());
+          records.push_back(std::move(r));
+        }
+      }
+    }
+  }
+  write_csv(opt.csv, records, {{"command", "table accuracy"}, {"scene", base}, {"seed", opt.run.seed}});
+  print_table(records, {"offset", "scheme", "kernel", "workload", "mrays_median", "mismatch_rate", "false_miss",
+                        "false_hit"}, stdout);
+  return 0;
+}
+
+const std::map<std::string, std::function<int(const TableOptions&)>>& registry() {
+  static const std::map<std::string, std::function<int(const TableOptions&)>> tables = {
+      {"accuracy", accuracy_table},
+  };
+  return tables;
+}
+
+}  // namespace
+
+std::vector<std::string> table_names() {
+  std::vector<std::string> names;
+  for (const auto& [name, fn] : registry()) names.push_back(name);
+  return names;
+}
+
+int run_table(const std::string& name, const TableOptions& opt) {
+  auto it = registry().find(name);
+  if (it == registry().end()) {
+    std::string known;
+    for (const auto& n : table_names()) known += " " + n;
+    throw InputError("unknown table '" + name + "' (available:" + known + ")");
+  }
+  return it->second(opt);
+}
+
+}  // namespace tb

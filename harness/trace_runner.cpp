@@ -1,0 +1,58 @@
+#include "harness/trace_runner.h"
+
+#include <pmmintrin.h>
+#include <xmmintrin.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <thread>
+
+namespace tb {
+
+void enable_ftz_daz() {
+  _MM_SET_FLUSH_ZERO_MODE(_MM_FLUSH_ZERO_ON);
+  _MM_SET_DENORMALS_ZERO_MODE(_MM_DENORMALS_ZERO_ON);
+}
+
+void trace_batch(const Traverser& t, const RayBatch& batch, std::span<Hit> hits, int threads) {
+  const uint32_t packets = batch.num_packets();
+  if (threads <= 1 || packets < 2) {
+    enable_ftz_daz();
+    t.trace(batch, PacketRange::all(batch), hits);
+    return;
+  }
+  // Small chunks keep both cores busy to the end even when packets differ in cost.
+  const uint32_t chunk = std::max<uint32_t>(1, std::min<uint32_t>(16, packets / (8 * threads)));
+  std::atomic<uint32_t> next{0};
+  auto worker = [&] {
+    enable_ftz_daz();
+    for (uint32_t p; (p = next.fetch_add(chunk)) < packets;)
+      t.trace(batch, {p, std::min(packets, p + chunk)}, hits);
+  };
+  std::vector<std::thread> pool;
+  for (int i = 1; i < threads; ++i) pool.emplace_back(worker);
+  worker();
+  for (auto& th : pool) th.join();
+}
+
+ThroughputStats measure(const Traverser& t, const RayBatch& batch, std::span<Hit> hits, int threads, int reps) {
+  ThroughputStats s;
+  trace_batch(t, batch, hits, threads);  // warm-up: caches, page faults, lazy allocations
+  std::vector<double> mrays;
+  for (int r = 0; r < reps; ++r) {
+    const auto t0 = std::chrono::steady_clock::now();
+    trace_batch(t, batch, hits, threads);
+    const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    s.seconds.push_back(sec);
+    mrays.push_back(double(batch.size()) / std::max(sec, 1e-9) * 1e-6);
+  }
+  std::sort(mrays.begin(), mrays.end());
+  const size_t n = mrays.size();
+  s.mrays_min = mrays.front();
+  s.mrays_max = mrays.back();
+  s.mrays_median = n % 2 ? mrays[n / 2] : 0.5 * (mrays[n / 2 - 1] + mrays[n / 2]);
+  return s;
+}
+
+}  // namespace tb

@@ -1,0 +1,728 @@
+// Polygon mesh files: OBJ, OFF and STL with small parsers of our own, PLY through OpenMesh.
+//
+// Why not OpenMesh for everything (the design card's first plan): measured on OpenMesh 9.0
+// (Debian 12), its readers change primitive ids or accept broken files silently:
+//  - OBJ: a face with a repeated vertex ("f 1 2 2") is dropped, shifting every later triangle id;
+//    "v nan 0 0" is skipped, shifting every later vertex index; loading through TriMesh adds
+//    connectivity checks that drop nothing on the shared scenes but print a "complex edge" line per
+//    non-manifold face and duplicate vertices. It is also ~6x slower than the parser below.
+//  - STL: facets with two equal corners are dropped; a truncated ASCII file loads without complaint.
+//  - OFF: '#' comments make the reader run on uninitialised counts (thousands of garbage faces);
+//    truncated files yield faces made of stale indices.
+// Correct ids are the point of a traversal benchmark (hits are compared by primitive id), so these
+// three simple formats get exact parsers with line-numbered errors. PLY (ASCII and binary, any
+// property layout) is where a library earns its keep: it goes through OpenMesh's reader, feeding a
+// triangle-soup importer (no connectivity, so nothing is dropped or duplicated) and checked against
+// the counts in the PLY header, the stream state (truncation) and the index range.
+#include <OpenMesh/Core/IO/IOManager.hh>
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/IO/importer/BaseImporter.hh>
+#include <OpenMesh/Core/System/omstream.hh>
+
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <mutex>
+#include <optional>
+#include <sstream>
+#include <string_view>
+#include <unordered_map>
+
+#include "structures/scene_loader.h"
+
+namespace tb {
+
+namespace {
+
+using detail::error_line;
+
+// ---------------------------------------------------------------------------------------------
+// Text helpers shared by the OBJ, OFF and ASCII STL parsers.
+
+inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+// Splits [p, end) into lines; '\r' before '\n' is blank-stripped by the tokenizer.
+struct LineReader {
+  const char* p;
+  const char* end;
+  size_t line = 0;
+  bool next(std::string_view& out) {
+    if (p >= end) return false;
+    const char* eol = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(end - p)));
+    if (!eol) eol = end;
+    out = std::string_view(p, static_cast<size_t>(eol - p));
+    p = eol < end ? eol + 1 : end;
+    ++line;
+    return true;
+  }
+};
+
+// Whitespace-separated tokens of one line.
+struct Tokens {
+  const char* p;
+  const char* e;
+  explicit Tokens(std::string_view s) : p(s.data()), e(s.data() + s.size()) {}
+  bool next(std::string_view& tok) {
+    while (p < e && is_blank(*p)) ++p;
+    if (p >= e) return false;
+    const char* b = p;
+    while (p < e && !is_blank(*p)) ++p;
+    tok = std::string_view(b, static_cast<size_t>(p - b));
+    return true;
+  }
+};
+
+// Parses a whole token as a float. Accepts a leading '+', which from_chars does not. A value below
+// the float range (1e-50) becomes its nearest float (0 or a denormal) instead of an error; one above
+// it stays an error, as do "nan"/"inf" (caught by the caller's finiteness check).
+bool parse_float(std::string_view tok, float& out) {
+  const char* b = tok.data();
+  const char* e = b + tok.size();
+  if (b < e && *b == '+') ++b;
+  auto r = std::from_chars(b, e, out);
+  if (r.ec == std::errc::result_out_of_range) {
+    double d;
+    auto rd = std::from_chars(b, e, d);
+    if (rd.ec != std::errc() || rd.ptr != e) return false;
+    out = static_cast<float>(d);  // overflow -> inf, rejected by the finiteness check
+    return true;
+  }
+  return r.ec == std::errc() && r.ptr == e;
+}
+
+// Parses a leading integer of tok; *rest gets the remainder (for OBJ's "v/vt/vn").
+bool parse_int_prefix(std::string_view tok, long long& out, std::string_view* rest) {
+  const char* b = tok.data();
+  const char* e = b + tok.size();
+  if (b < e && *b == '+') ++b;
+  auto r = std::from_chars(b, e, out);
+  if (r.ec != std::errc()) return false;
+  if (rest) *rest = std::string_view(r.ptr, static_cast<size_t>(e - r.ptr));
+  else if (r.ptr != e) return false;
+  return true;
+}
+
+std::string quote(std::string_view s) {
+  std::string out = "'";
+  for (char c : s.substr(0, 40)) out += (static_cast<unsigned char>(c) < 32 || c == 127) ? '?' : c;
+  if (s.size() > 40) out += "...";
+  return out + "'";
+}
+
+std::string at_line(size_t line) { return "line " + std::to_string(line) + ": "; }
+
+// Triangle count guard: ids are uint32 and 0xFFFFFFFF means "no hit".
+constexpr size_t kMaxElements = 0xFFFFFFFEull;
+
+// ---------------------------------------------------------------------------------------------
+// OBJ
+
+Scene parse_obj(const std::string& path, const std::string& data) {
+  Scene s;
+  s.name = detail::file_stem(path);
+  // ~30 bytes per vertex line and per face line in typical files; a rough reservation saves most
+  // of the reallocation copies on the 10+ MB scenes.
+  s.positions.reserve(data.size() / 64);
+  s.triangles.reserve(data.size() / 64);
+
+  LineReader lines{data.data(), data.data() + data.size()};
+  std::string_view line, tok;
+  std::vector<uint32_t> face;
+  long long max_index = -1;  // largest 0-based index seen, checked once all vertices are known
+  size_t max_index_line = 0;
+  while (lines.next(line)) {
+    Tokens t(line);
+    if (!t.next(tok)) continue;
+    if (tok == "v") {
+      Vec3 p;
+      for (int c = 0; c < 3; ++c) {
+        if (!t.next(tok))
+          throw InputError(error_line(path, at_line(lines.line) + "vertex needs three coordinates (truncated file?)"));
+        if (!parse_float(tok, p[c]))
+          throw InputError(error_line(path, at_line(lines.line) + "vertex coordinate " + quote(tok) + " is not a number"));
+      }
+      // Extra values (w, or the r g b some exporters append) carry no geometry.
+      if (!is_finite(p))
+        throw InputError(error_line(path, at_line(lines.line) + "vertex " + std::to_string(s.positions.size() + 1) +
+                                              " has a NaN or Inf coordinate"));
+      if (s.positions.size() >= kMaxElements) throw InputError(error_line(path, "more than 2^32-2 vertices"));
+      s.positions.push_back(p);
+    } else if (tok == "f") {
+      face.clear();
+      while (t.next(tok)) {
+        long long i;
+        std::string_view rest;
+        if (!parse_int_prefix(tok, i, &rest) || (!rest.empty() && rest[0] != '/'))
+          throw InputError(error_line(path, at_line(lines.line) + "face vertex " + quote(tok) + " is not an index"));
+        long long idx;
+        if (i > 0) {
+          idx = i - 1;
+          if (idx >= static_cast<long long>(kMaxElements))
+            throw InputError(error_line(path, at_line(lines.line) + "vertex index " + std::to_string(i) + " is too large"));
+          // Positive indices may name vertices defined further down (tinyobjloader and most
+          // readers allow it), so the range check waits for the end of the file.
+          if (idx > max_index) {
+            max_index = idx;
+            max_index_line = lines.line;
+          }
+        } else if (i < 0) {
+          // Relative index: -1 is the most recently defined vertex.
+          idx = static_cast<long long>(s.positions.size()) + i;
+          if (idx < 0)
+            throw InputError(error_line(path, at_line(lines.line) + "relative vertex index " + std::to_string(i) +
+                                                  " points before the first vertex (" +
+                                                  std::to_string(s.positions.size()) + " defined so far)"));
+        } else {
+          throw InputError(error_line(path, at_line(lines.line) + "vertex index 0 is invalid (OBJ indices start at 1)"));
+        }
+        face.push_back(static_cast<uint32_t>(idx));
+      }
+      if (face.size() < 3)
+        throw InputError(error_line(path, at_line(lines.line) + "face has " + std::to_string(face.size()) +
+                                              " vertices, needs at least 3 (truncated file?)"));
+      // DESIGN.md: polygon (v0..vn) -> fan (v0, v{i-1}, v{i}) in file order. Degenerate faces
+      // are kept so that every later id still matches the file.
+      for (size_t i = 2; i < face.size(); ++i) s.triangles.push_back({face[0], face[i - 1], face[i]});
+      if (s.triangles.size() > kMaxElements) throw InputError(error_line(path, "more than 2^32-2 triangles"));
+    }
+    // Everything else (vt, vn, g, o, s, usemtl, mtllib, l, p, comments, ...) carries no triangles.
+  }
+  if (max_index >= static_cast<long long>(s.positions.size()))
+    throw InputError(error_line(path, at_line(max_index_line) + "face uses vertex " + std::to_string(max_index + 1) +
+                                          " but the file defines only " + std::to_string(s.positions.size()) +
+                                          " vertices"));
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// OFF (Geomview): "[ST][C][N]OFF" header (optional), "nv nf [ne]", nv vertex lines, nf face lines
+// "k i0 .. i{k-1} [colour]". '#' starts a comment. Parsed line by line, as every writer emits it.
+
+// Next non-empty line with its comment removed; false at end of file.
+bool next_off_line(LineReader& lines, std::string_view& out) {
+  std::string_view l;
+  while (lines.next(l)) {
+    size_t hash = l.find('#');
+    if (hash != std::string_view::npos) l = l.substr(0, hash);
+    Tokens t(l);
+    std::string_view tok;
+    if (t.next(tok)) {
+      out = l;
+      return true;
+    }
+  }
+  return false;
+}
+
+Scene parse_off(const std::string& path, const std::string& data) {
+  Scene s;
+  s.name = detail::file_stem(path);
+  LineReader lines{data.data(), data.data() + data.size()};
+  std::string_view line, tok;
+  if (!next_off_line(lines, line)) throw InputError(error_line(path, "file holds only comments or blank lines"));
+
+  Tokens t(line);
+  t.next(tok);
+  long long counts[3] = {0, 0, 0};
+  int ncounts = 0;
+  std::string_view header = tok;
+  const bool has_keyword = header.size() >= 3 && header.substr(header.size() - 3) == "OFF";
+  if (has_keyword) {
+    std::string_view prefix = header.substr(0, header.size() - 3);
+    if (prefix.find_first_not_of("STCN") != std::string_view::npos)
+      throw InputError(error_line(path, "OFF variant " + quote(header) + " is not supported (4OFF/nOFF have no 3D triangles)"));
+    if (t.next(tok)) {
+      if (tok == "BINARY") throw InputError(error_line(path, "binary OFF is not supported; convert it to ASCII OFF or PLY"));
+      // Some writers put the counts on the header line.
+      t = Tokens(line);
+      t.next(tok);
+    } else if (!next_off_line(lines, line)) {
+      throw InputError(error_line(path, "file ends after the OFF header (no vertex/face counts)"));
+    } else {
+      t = Tokens(line);
+    }
+  } else {
+    long long dummy;
+    if (!parse_int_prefix(tok, dummy, nullptr))
+      throw InputError(error_line(path, "not an OFF file (first word " + quote(tok) + ", expected OFF)"));
+    t = Tokens(line);  // no keyword: this line holds the counts
+  }
+  while (ncounts < 3 && t.next(tok)) {
+    if (!parse_int_prefix(tok, counts[ncounts], nullptr) || counts[ncounts] < 0)
+      throw InputError(error_line(path, at_line(lines.line) + "count " + quote(tok) + " is not a non-negative integer"));
+    ++ncounts;
+  }
+  if (ncounts < 2) throw InputError(error_line(path, at_line(lines.line) + "expected 'vertices faces [edges]' counts"));
+  const long long nv = counts[0], nf = counts[1];
+  // Each vertex and face takes at least one line of >= 2 bytes; larger counts are a wrong header or
+  // a cut file, and must not turn into a huge reservation.
+  if (nv + nf > static_cast<long long>(data.size()))
+    throw InputError(error_line(path, "header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
+                                          " faces, more than a " + std::to_string(data.size()) +
+                                          "-byte file can hold (truncated file or wrong header?)"));
+  if (nv >= static_cast<long long>(kMaxElements)) throw InputError(error_line(path, "more than 2^32-2 vertices"));
+  s.positions.reserve(static_cast<size_t>(nv));
+  s.triangles.reserve(static_cast<size_t>(nf));
+
+  for (long long v = 0; v < nv; ++v) {
+    if (!next_off_line(lines, line))
+      throw InputError(error_line(path, "file ends after " + std::to_string(v) + " of " + std::to_string(nv) +
+                                            " vertices (truncated?)"));
+    Tokens vt(line);
+    Vec3 p;
+    for (int c = 0; c < 3; ++c) {
+      if (!vt.next(tok))
+        throw InputError(error_line(path, at_line(lines.line) + "vertex needs three coordinates"));
+      if (!parse_float(tok, p[c]))
+        throw InputError(error_line(path, at_line(lines.line) + "vertex coordinate " + quote(tok) + " is not a number"));
+    }
+    if (!is_finite(p))
+      throw InputError(error_line(path, at_line(lines.line) + "vertex " + std::to_string(v) + " has a NaN or Inf coordinate"));
+    s.positions.push_back(p);
+  }
+  std::vector<uint32_t> face;
+  for (long long f = 0; f < nf; ++f) {
+    if (!next_off_line(lines, line))
+      throw InputError(error_line(path, "file ends after " + std::to_string(f) + " of " + std::to_string(nf) +
+                                            " faces (truncated?)"));
+    Tokens ft(line);
+    long long k;
+    ft.next(tok);
+    if (!parse_int_prefix(tok, k, nullptr))
+      throw InputError(error_line(path, at_line(lines.line) + "face vertex count " + quote(tok) + " is not an integer"));
+    if (k < 3)
+      throw InputError(error_line(path, at_line(lines.line) + "face has " + std::to_string(k) + " vertices, needs at least 3"));
+    face.clear();
+    for (long long i = 0; i < k; ++i) {
+      long long idx;
+      if (!ft.next(tok))
+        throw InputError(error_line(path, at_line(lines.line) + "face lists fewer than its " + std::to_string(k) +
+                                              " vertices (truncated?)"));
+      if (!parse_int_prefix(tok, idx, nullptr))
+        throw InputError(error_line(path, at_line(lines.line) + "face vertex " + quote(tok) + " is not an index"));
+      if (idx < 0 || idx >= nv)
+        throw InputError(error_line(path, at_line(lines.line) + "vertex index " + std::to_string(idx) +
+                                              " is out of range (" + std::to_string(nv) + " vertices)"));
+      face.push_back(static_cast<uint32_t>(idx));
+    }
+    // Remaining tokens are an optional face colour.
+    for (size_t i = 2; i < face.size(); ++i) s.triangles.push_back({face[0], face[i - 1], face[i]});
+    if (s.triangles.size() > kMaxElements) throw InputError(error_line(path, "more than 2^32-2 triangles"));
+  }
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// STL. Corners are shared by exact bit pattern, as STL has no indices; every facet becomes one
+// triangle in file order, degenerate ones included.
+
+struct BitsHash {
+  size_t operator()(const std::array<uint32_t, 3>& k) const {
+    uint64_t h = k[0] * 0x9E3779B97F4A7C15ull;
+    h ^= (k[1] + 0x7F4A7C15ull) * 0xC2B2AE3D27D4EB4Full;
+    h ^= (k[2] + 0x165667B1ull) * 0x165667B19E3779F9ull;
+    return static_cast<size_t>(h ^ (h >> 29));
+  }
+};
+
+struct VertexWelder {
+  std::unordered_map<std::array<uint32_t, 3>, uint32_t, BitsHash> ids;
+  Scene* s;
+  uint32_t add(Vec3 p) {
+    std::array<uint32_t, 3> key;
+    std::memcpy(key.data(), &p, sizeof key);
+    auto [it, inserted] = ids.try_emplace(key, static_cast<uint32_t>(s->positions.size()));
+    if (inserted) s->positions.push_back(p);
+    return it->second;
+  }
+};
+
+Scene parse_stl_binary(const std::string& path, const std::string& data, uint32_t count) {
+  Scene s;
+  s.name = detail::file_stem(path);
+  s.triangles.reserve(count);
+  s.positions.reserve(count / 2 + 3);
+  VertexWelder weld{{}, &s};
+  weld.ids.reserve(count / 2 + 3);
+  const char* rec = data.data() + 84;
+  for (uint32_t f = 0; f < count; ++f, rec += 50) {
+    std::array<uint32_t, 3> tri;
+    for (int c = 0; c < 3; ++c) {
+      Vec3 p;
+      std::memcpy(&p, rec + 12 + 12 * c, 12);  // little-endian floats, as the format fixes
+      if (!is_finite(p))
+        throw InputError(error_line(path, "facet " + std::to_string(f) + " has a NaN or Inf coordinate"));
+      tri[c] = weld.add(p);
+    }
+    s.triangles.push_back(tri);
+  }
+  return s;
+}
+
+// ASCII STL tokenizer that keeps line numbers for messages.
+struct StlTokens {
+  const char* p;
+  const char* e;
+  size_t line = 1;
+  bool next(std::string_view& tok) {
+    while (p < e && (is_blank(*p) || *p == '\n')) {
+      if (*p == '\n') ++line;
+      ++p;
+    }
+    if (p >= e) return false;
+    const char* b = p;
+    while (p < e && !is_blank(*p) && *p != '\n') ++p;
+    tok = std::string_view(b, static_cast<size_t>(p - b));
+    return true;
+  }
+  void skip_line() {
+    while (p < e && *p != '\n') ++p;
+  }
+};
+
+bool iequals(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i)
+    if (std::tolower(static_cast<unsigned char>(a[i])) != std::tolower(static_cast<unsigned char>(b[i]))) return false;
+  return true;
+}
+
+Scene parse_stl_ascii(const std::string& path, const std::string& data) {
+  Scene s;
+  s.name = detail::file_stem(path);
+  VertexWelder weld{{}, &s};
+  StlTokens t{data.data(), data.data() + data.size()};
+  std::string_view tok;
+  // A binary STL whose 80-byte header happens to start with "solid" and whose size does not match
+  // its count lands here; say so instead of reporting a confusing token.
+  const bool looks_binary = std::memchr(data.data(), '\0', std::min<size_t>(data.size(), 4096)) != nullptr;
+  auto fail = [&](const std::string& what) -> InputError {
+    if (looks_binary)
+      return InputError(error_line(path, "binary STL whose header starts with 'solid' but whose size does not match "
+                                         "its triangle count (truncated?)"));
+    return InputError(error_line(path, at_line(t.line) + what));
+  };
+  auto expect = [&](std::string_view word) {
+    if (!t.next(tok)) throw fail("file ends where '" + std::string(word) + "' was expected (truncated?)");
+    if (!iequals(tok, word)) throw fail("expected '" + std::string(word) + "', found " + quote(tok));
+  };
+
+  if (!t.next(tok) || !iequals(tok, "solid")) throw fail("ASCII STL must start with 'solid'");
+  t.skip_line();  // solid name
+  for (;;) {
+    if (!t.next(tok)) throw fail("file ends without 'endsolid' (truncated?)");
+    if (iequals(tok, "endsolid")) {
+      t.skip_line();
+      // Some tools concatenate several solids in one file.
+      if (t.next(tok)) {
+        if (!iequals(tok, "solid")) throw fail("expected 'solid' or end of file after 'endsolid', found " + quote(tok));
+        t.skip_line();
+        continue;
+      }
+      break;
+    }
+    if (!iequals(tok, "facet")) throw fail("expected 'facet' or 'endsolid', found " + quote(tok));
+    expect("normal");
+    // The stored normal is not needed (and some writers emit "nan" there): skip its 3 values.
+    for (int i = 0; i < 3; ++i)
+      if (!t.next(tok)) throw fail("file ends inside a facet normal (truncated?)");
+    expect("outer");
+    expect("loop");
+    std::array<uint32_t, 3> tri;
+    for (int c = 0; c < 3; ++c) {
+      expect("vertex");
+      Vec3 p;
+      for (int k = 0; k < 3; ++k) {
+        if (!t.next(tok)) throw fail("file ends inside a vertex (truncated?)");
+        if (!parse_float(tok, p[k])) throw fail("vertex coordinate " + quote(tok) + " is not a number");
+      }
+      if (!is_finite(p)) throw fail("vertex has a NaN or Inf coordinate");
+      tri[c] = weld.add(p);
+    }
+    if (!t.next(tok)) throw fail("file ends inside a facet (truncated?)");
+    if (iequals(tok, "vertex")) throw fail("facet with more than 3 vertices; only triangles are valid STL");
+    if (!iequals(tok, "endloop")) throw fail("expected 'endloop', found " + quote(tok));
+    expect("endfacet");
+    s.triangles.push_back(tri);
+    if (s.triangles.size() > kMaxElements) throw InputError(error_line(path, "more than 2^32-2 triangles"));
+  }
+  return s;
+}
+
+Scene parse_stl(const std::string& path, const std::string& data) {
+  size_t first = 0;
+  while (first < data.size() && (is_blank(data[first]) || data[first] == '\n')) ++first;
+  const bool starts_solid = data.compare(first, 5, "solid") == 0;
+  if (data.size() >= 84) {
+    uint32_t count;
+    std::memcpy(&count, data.data() + 80, 4);
+    const uint64_t expected = 84 + 50ull * count;
+    if (expected == data.size()) return parse_stl_binary(path, data, count);
+    if (!starts_solid) {
+      if (expected > data.size())
+        throw InputError(error_line(path, "binary STL declares " + std::to_string(count) + " triangles (" +
+                                              std::to_string(expected) + " bytes) but the file has " +
+                                              std::to_string(data.size()) + " bytes (truncated?)"));
+      return parse_stl_binary(path, data, count);  // trailing padding after the last facet is ignored
+    }
+  }
+  if (!starts_solid)
+    throw InputError(error_line(path, "not an STL file (no 'solid' header and too short for binary STL)"));
+  return parse_stl_ascii(path, data);
+}
+
+// ---------------------------------------------------------------------------------------------
+// OpenMesh (PLY)
+
+// Receives what an OpenMesh reader parses and keeps it as a triangle soup in reading order:
+// polygons are fanned (v0, v{i-1}, v{i}) like everything else; no connectivity is built, so the
+// "complex edge" rejections and vertex duplication of OpenMesh's mesh importer never happen.
+class SoupImporter final : public OpenMesh::IO::BaseImporter {
+ public:
+  using VertexHandle = OpenMesh::VertexHandle;
+  using FaceHandle = OpenMesh::FaceHandle;
+  using HalfedgeHandle = OpenMesh::HalfedgeHandle;
+  using EdgeHandle = OpenMesh::EdgeHandle;
+  using Vec3f = OpenMesh::Vec3f;
+  using Vec3d = OpenMesh::Vec3d;
+
+  Scene& scene;
+  size_t polygons = 0;
+  std::string error;  // first problem seen; readers keep going, so the loader reports it afterwards
+
+  explicit SoupImporter(Scene& s) : scene(s) {}
+
+  VertexHandle add_vertex(const Vec3f& p) override {
+    scene.positions.push_back({p[0], p[1], p[2]});
+    return VertexHandle(static_cast<int>(scene.positions.size() - 1));
+  }
+  VertexHandle add_vertex(const Vec3d& p) override { return add_vertex(Vec3f(float(p[0]), float(p[1]), float(p[2]))); }
+  VertexHandle add_vertex() override { return add_vertex(Vec3f(0.f, 0.f, 0.f)); }
+  void set_point(VertexHandle vh, const Vec3f& p) override {
+    if (vh.idx() >= 0 && static_cast<size_t>(vh.idx()) < scene.positions.size())
+      scene.positions[static_cast<size_t>(vh.idx())] = {p[0], p[1], p[2]};
+  }
+  FaceHandle add_face(const VHandles& v) override {
+    const size_t poly = polygons++;
+    if (v.size() < 3) {
+      note("face " + std::to_string(poly) + " has " + std::to_string(v.size()) + " vertices, needs at least 3");
+      return FaceHandle();
+    }
+    for (const VertexHandle& h : v)
+      if (h.idx() < 0 || static_cast<size_t>(h.idx()) >= scene.positions.size()) {
+        note("face " + std::to_string(poly) + " uses vertex index " + std::to_string(h.idx()) + " but there are " +
+             std::to_string(scene.positions.size()) + " vertices");
+        return FaceHandle();
+      }
+    for (size_t i = 2; i < v.size(); ++i)
+      scene.triangles.push_back({uint32_t(v[0].idx()), uint32_t(v[i - 1].idx()), uint32_t(v[i].idx())});
+    return FaceHandle(static_cast<int>(scene.triangles.size() - 1));
+  }
+  // Only the OM format builds faces from halfedges; it is not a scene format here.
+  HalfedgeHandle add_edge(VertexHandle, VertexHandle) override {
+    note("half-edge based input is not supported");
+    return HalfedgeHandle();
+  }
+  FaceHandle add_face(HalfedgeHandle) override {
+    note("half-edge based input is not supported");
+    return FaceHandle();
+  }
+  size_t n_vertices() const override { return scene.positions.size(); }
+  size_t n_faces() const override { return scene.triangles.size(); }
+  size_t n_edges() const override { return 0; }
+
+  // Attributes: not needed for traversal.
+  void add_face_texcoords(FaceHandle, VertexHandle, const std::vector<OpenMesh::Vec2f>&) override {}
+  void add_face_texcoords(FaceHandle, VertexHandle, const std::vector<Vec3f>&) override {}
+  void set_face_texindex(FaceHandle, int) override {}
+  void set_halfedge(VertexHandle, HalfedgeHandle) override {}
+  void set_normal(VertexHandle, const Vec3f&) override {}
+  void set_normal(VertexHandle, const Vec3d&) override {}
+  void set_color(VertexHandle, const OpenMesh::Vec3uc&) override {}
+  void set_color(VertexHandle, const OpenMesh::Vec4uc&) override {}
+  void set_color(VertexHandle, const Vec3f&) override {}
+  void set_color(VertexHandle, const OpenMesh::Vec4f&) override {}
+  void set_texcoord(VertexHandle, const OpenMesh::Vec2f&) override {}
+  void set_status(VertexHandle, const OpenMesh::Attributes::StatusInfo&) override {}
+  void set_next(HalfedgeHandle, HalfedgeHandle) override {}
+  void set_face(HalfedgeHandle, FaceHandle) override {}
+  void request_face_texcoords2D() override {}
+  void set_texcoord(HalfedgeHandle, const OpenMesh::Vec2f&) override {}
+  void set_texcoord(VertexHandle, const Vec3f&) override {}
+  void set_texcoord(HalfedgeHandle, const Vec3f&) override {}
+  void set_status(HalfedgeHandle, const OpenMesh::Attributes::StatusInfo&) override {}
+  void set_color(EdgeHandle, const OpenMesh::Vec3uc&) override {}
+  void set_color(EdgeHandle, const OpenMesh::Vec4uc&) override {}
+  void set_color(EdgeHandle, const Vec3f&) override {}
+  void set_color(EdgeHandle, const OpenMesh::Vec4f&) override {}
+  void set_status(EdgeHandle, const OpenMesh::Attributes::StatusInfo&) override {}
+  void set_normal(FaceHandle, const Vec3f&) override {}
+  void set_normal(FaceHandle, const Vec3d&) override {}
+  void set_color(FaceHandle, const OpenMesh::Vec3uc&) override {}
+  void set_color(FaceHandle, const OpenMesh::Vec4uc&) override {}
+  void set_color(FaceHandle, const Vec3f&) override {}
+  void set_color(FaceHandle, const OpenMesh::Vec4f&) override {}
+  void set_status(FaceHandle, const OpenMesh::Attributes::StatusInfo&) override {}
+  void add_texture_information(int, std::string) override {}
+
+ private:
+  void note(const std::string& what) {
+    if (error.empty()) error = what;
+  }
+};
+
+// OpenMesh reports problems by printing to its global omerr/omlog/omout streams. While a file is
+// read they go into a buffer instead: nothing leaks onto the console, and the text can go into the
+// InputError. The streams are process-wide, hence the mutex.
+class OmCapture {
+ public:
+  OmCapture() : lock_(mutex()) {
+    for (OpenMesh::mostream* s : {&omerr(), &omlog(), &omout()}) {
+      s->flush();
+      Saved sv{s, s->disconnect(std::cerr), s->disconnect(std::clog), s->disconnect(std::cout)};
+      s->connect(buf_);
+      saved_.push_back(sv);
+    }
+  }
+  ~OmCapture() {
+    for (const Saved& sv : saved_) {
+      sv.stream->flush();
+      sv.stream->disconnect(buf_);
+      if (sv.cerr) sv.stream->connect(std::cerr);
+      if (sv.clog) sv.stream->connect(std::clog);
+      if (sv.cout) sv.stream->connect(std::cout);
+    }
+  }
+  // First line of what OpenMesh printed, or "" when it said nothing.
+  std::string first_message() {
+    for (const Saved& sv : saved_) sv.stream->flush();
+    std::istringstream in(buf_.str());
+    std::string l;
+    while (std::getline(in, l))
+      if (l.find_first_not_of(" \t\r") != std::string::npos) return l.substr(0, 200);
+    return "";
+  }
+
+ private:
+  struct Saved {
+    OpenMesh::mostream* stream;
+    bool cerr, clog, cout;
+  };
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
+  std::lock_guard<std::mutex> lock_;
+  std::ostringstream buf_;
+  std::vector<Saved> saved_;
+};
+
+// Element counts from a PLY header, so that faces a reader skips or invents are noticed.
+struct PlyCounts {
+  long long vertices = -1, faces = -1;
+};
+
+PlyCounts read_ply_header(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  PlyCounts c;
+  size_t n = 0, bytes = 0;
+  while (std::getline(in, line)) {
+    ++n;
+    bytes += line.size() + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (n == 1 && line != "ply") throw InputError(error_line(path, "not a PLY file (first line is not 'ply')"));
+    if (line == "end_header") return c;
+    std::istringstream ls(line);
+    std::string kw, name;
+    long long count;
+    if (ls >> kw && kw == "element") {
+      if (!(ls >> name >> count) || count < 0)
+        throw InputError(error_line(path, "PLY header line " + std::to_string(n) + " is a malformed element declaration"));
+      if (name == "vertex") c.vertices = count;
+      if (name == "face") c.faces = count;
+    }
+    if (bytes > (1u << 20)) break;  // a real header is a few hundred bytes
+  }
+  throw InputError(error_line(path, "PLY header has no 'end_header' line (truncated or not a PLY file)"));
+}
+
+}  // namespace
+
+Scene load_obj(const std::string& path) { return parse_obj(path, detail::read_file_bytes(path)); }
+Scene load_off(const std::string& path) { return parse_off(path, detail::read_file_bytes(path)); }
+Scene load_stl(const std::string& path) { return parse_stl(path, detail::read_file_bytes(path)); }
+
+Scene load_mesh_openmesh(const std::string& path) {
+  detail::check_regular_file(path);
+  std::string ext = std::filesystem::path(path).extension().string();
+  if (!ext.empty()) ext.erase(0, 1);
+  for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  if (ext.empty() || !OpenMesh::IO::IOManager().can_read(ext))
+    throw InputError(error_line(path, "OpenMesh has no reader for extension '" + ext + "'"));
+
+  const bool is_ply = ext == "ply";
+  PlyCounts declared;
+  if (is_ply) {
+    declared = read_ply_header(path);
+    if (declared.vertices < 0) throw InputError(error_line(path, "PLY file declares no 'vertex' element"));
+    if (declared.faces <= 0)
+      throw InputError(error_line(path, "PLY file declares no faces (only the 'face' element is read; "
+                                        "'tristrips' and point clouds are not supported)"));
+    // Every element needs at least one byte; larger counts must not reach OpenMesh's allocations.
+    const auto size = static_cast<long long>(std::filesystem::file_size(path));
+    if (declared.vertices + declared.faces > size)
+      throw InputError(error_line(path, "PLY header declares " + std::to_string(declared.vertices) + " vertices and " +
+                                            std::to_string(declared.faces) + " faces, more than a " +
+                                            std::to_string(size) + "-byte file can hold (truncated?)"));
+  }
+
+  Scene s;
+  s.name = detail::file_stem(path);
+  SoupImporter importer(s);
+  OpenMesh::IO::Options opt;
+  bool ok = false;
+  bool stream_failed = false;
+  std::string om_message;
+  {
+    OmCapture capture;
+    try {
+      if (is_ply) {
+        // The stream overload lets us see whether the reader ran out of data (failbit): OpenMesh's
+        // PLY reader itself fills missing elements with stale values and reports success.
+        std::ifstream in(path, std::ios::binary);
+        ok = OpenMesh::IO::IOManager().read(in, ext, importer, opt);
+        stream_failed = in.fail();
+      } else {
+        ok = OpenMesh::IO::IOManager().read(path, importer, opt);
+      }
+    } catch (const std::exception& e) {
+      throw InputError(error_line(path, std::string("OpenMesh failed to read the file (") + e.what() + ")"));
+    }
+    om_message = capture.first_message();
+  }
+  if (!ok)
+    throw InputError(error_line(path, "OpenMesh could not read the file" + (om_message.empty() ? "" : ": " + om_message)));
+  if (!importer.error.empty()) throw InputError(error_line(path, importer.error));
+  if (is_ply) {
+    if (stream_failed)
+      throw InputError(error_line(path, "file ends early or holds a value that is not a number (truncated?)"));
+    if (static_cast<long long>(s.positions.size()) != declared.vertices ||
+        static_cast<long long>(importer.polygons) != declared.faces)
+      throw InputError(error_line(path, "header declares " + std::to_string(declared.vertices) + " vertices and " +
+                                            std::to_string(declared.faces) + " faces but OpenMesh read " +
+                                            std::to_string(s.positions.size()) + " and " +
+                                            std::to_string(importer.polygons)));
+  }
+  for (size_t i = 0; i < s.positions.size(); ++i)
+    if (!is_finite(s.positions[i]))
+      throw InputError(error_line(path, "vertex " + std::to_string(i) + " has a NaN or Inf coordinate"));
+  if (s.triangles.size() > kMaxElements || s.positions.size() > kMaxElements)
+    throw InputError(error_line(path, "more than 2^32-2 triangles or vertices"));
+  return s;
+}
+
+}  // namespace tb

@@ -1,0 +1,64 @@
+#include "structures/scene.h"
+
+#include <cstring>
+
+namespace tb {
+
+AABB Scene::bounds() const {
+  AABB b;
+  for (const auto& t : triangles)
+    for (uint32_t i : t) b.grow(positions[i]);
+  return b;
+}
+
+AABB Scene::triangle_bounds(uint32_t tri) const {
+  AABB b;
+  for (int c = 0; c < 3; ++c) b.grow(vertex(tri, c));
+  return b;
+}
+
+void Scene::validate() const {
+  if (triangles.empty()) throw InputError("scene '" + name + "' has no triangles");
+  for (size_t i = 0; i < positions.size(); ++i)
+    if (!is_finite(positions[i]))
+      throw InputError("scene '" + name + "': vertex " + std::to_string(i) + " has a NaN or Inf coordinate");
+  for (size_t t = 0; t < triangles.size(); ++t)
+    for (uint32_t i : triangles[t])
+      if (i >= positions.size())
+        throw InputError("scene '" + name + "': triangle " + std::to_string(t) + " uses vertex index " +
+                         std::to_string(i) + " but there are " + std::to_string(positions.size()) + " vertices");
+}
+
+uint64_t Scene::content_hash() const {
+  uint64_t h = 1469598103934665603ull;
+  auto mix = [&](const void* data, size_t n) {
+    auto* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  };
+  mix(positions.data(), positions.size() * sizeof(Vec3));
+  mix(triangles.data(), triangles.size() * sizeof(triangles[0]));
+  return h;
+}
+
+void Scene::ensure_views() {
+  if (!views.empty()) return;
+  AABB b = bounds();
+  Vec3 c = b.centre(), e = b.extent();
+  // Three corners at 0.9x the half-diagonal beyond the box, all looking at the centre.
+  const Vec3 dirs[3] = {{1, 0.6f, 1}, {-1, 0.4f, 0.8f}, {0.7f, 0.9f, -1}};
+  const char* names[3] = {"corner1", "corner2", "corner3"};
+  for (int i = 0; i < 3; ++i) {
+    Vec3 eye = c + dirs[i] * e * 0.95f;
+    views.push_back({names[i], eye, c, {0, 1, 0}, 60.f});
+  }
+}
+
+void Scene::translate(Vec3 offset) {
+  for (auto& p : positions) p = p + offset;
+  for (auto& v : views) {
+    v.eye = v.eye + offset;
+    v.target = v.target + offset;
+  }
+}
+
+}  // namespace tb

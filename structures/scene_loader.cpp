@@ -1,0 +1,187 @@
+// Dispatch by extension, the checks every format shares, and camera views from scenes.json.
+#include "structures/scene_loader.h"
+
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+namespace tb {
+
+namespace fs = std::filesystem;
+
+namespace detail {
+
+std::string error_line(const std::string& path, const std::string& what) {
+  // Library messages (tinygltf, OpenMesh) come with embedded line breaks; the CLI contract is one
+  // line per error, so fold them into "; ".
+  std::string out = path + ": ";
+  bool pending_sep = false;
+  for (char c : what) {
+    if (c == '\n' || c == '\r') {
+      pending_sep = true;
+      continue;
+    }
+    if (pending_sep) {
+      out += "; ";
+      pending_sep = false;
+    }
+    out += c;
+  }
+  while (!out.empty() && (out.back() == ' ' || out.back() == ';')) out.pop_back();
+  return out;
+}
+
+std::string file_stem(const std::string& path) { return fs::path(path).stem().string(); }
+
+void check_regular_file(const std::string& path) {
+  std::error_code ec;
+  fs::file_status st = fs::status(path, ec);
+  if (ec && ec != std::errc::no_such_file_or_directory)
+    throw InputError(error_line(path, "cannot access file (" + ec.message() + ")"));
+  if (!fs::exists(st)) throw InputError(error_line(path, "file not found"));
+  if (fs::is_directory(st)) throw InputError(error_line(path, "is a directory, not a scene file"));
+  if (!fs::is_regular_file(st)) throw InputError(error_line(path, "is not a regular file"));
+  // Opening is the only reliable readability test (permissions, ACLs, root squash...).
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) throw InputError(error_line(path, std::string("cannot open file (") + std::strerror(errno) + ")"));
+  std::fclose(f);
+  if (fs::file_size(path, ec) == 0 && !ec) throw InputError(error_line(path, "file is empty"));
+}
+
+std::string read_file_bytes(const std::string& path) {
+  check_regular_file(path);
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
+  if (!f) throw InputError(error_line(path, std::string("cannot open file (") + std::strerror(errno) + ")"));
+  std::string data;
+  char buf[1 << 16];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f.get())) > 0) data.append(buf, n);
+  if (std::ferror(f.get())) throw InputError(error_line(path, "read error"));
+  if (data.empty()) throw InputError(error_line(path, "file is empty"));
+  return data;
+}
+
+}  // namespace detail
+
+namespace {
+
+std::string lower_extension(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+// scenes.json values are checked here rather than trusted: a typo there would otherwise become a
+// camera full of NaNs deep inside a workload generator.
+Vec3 json_vec3(const nlohmann::json& j, const std::string& json_path, const std::string& what) {
+  if (!j.is_array() || j.size() != 3)
+    throw InputError(detail::error_line(json_path, what + " must be a list of three numbers"));
+  Vec3 v;
+  for (int i = 0; i < 3; ++i) {
+    if (!j[i].is_number()) throw InputError(detail::error_line(json_path, what + " must be a list of three numbers"));
+    v[i] = j[i].get<float>();
+  }
+  if (!is_finite(v)) throw InputError(detail::error_line(json_path, what + " has a non-finite or out-of-range component"));
+  return v;
+}
+
+}  // namespace
+
+bool has_scene_file_extension(const std::string& path) {
+  std::string ext = lower_extension(path);
+  return ext == ".gltf" || ext == ".glb" || ext == ".obj" || ext == ".ply" || ext == ".off" || ext == ".stl";
+}
+
+std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
+  fs::path json_path = fs::path(scene_path).parent_path() / "scenes.json";
+  std::error_code ec;
+  if (!fs::is_regular_file(json_path, ec)) return {};
+  const std::string jp = json_path.string();
+  std::string text = detail::read_file_bytes(jp);
+  nlohmann::json root = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (root.is_discarded()) throw InputError(detail::error_line(jp, "is not valid JSON"));
+
+  // The shared file maps scene names to entries; a plain list of entries is accepted as well.
+  std::vector<const nlohmann::json*> entries;
+  if (root.is_object())
+    for (const auto& [key, value] : root.items()) entries.push_back(&value);
+  else if (root.is_array())
+    for (const auto& value : root) entries.push_back(&value);
+  else
+    throw InputError(detail::error_line(jp, "must hold an object or a list of scene entries"));
+
+  const std::string file_name = fs::path(scene_path).filename().string();
+  for (const nlohmann::json* e : entries) {
+    if (!e->is_object()) continue;
+    auto file = e->find("file");
+    if (file == e->end() || !file->is_string() || file->get<std::string>() != file_name) continue;
+    auto views = e->find("views");
+    if (views == e->end()) continue;
+    const std::string where = "entry for '" + file_name + "'";
+    if (!views->is_array()) throw InputError(detail::error_line(jp, where + ": views must be a list"));
+    std::vector<CameraView> out;
+    for (size_t i = 0; i < views->size(); ++i) {
+      const nlohmann::json& v = (*views)[i];
+      const std::string vw = where + ", view " + std::to_string(i + 1);
+      if (!v.is_object() || !v.contains("eye") || !v.contains("target"))
+        throw InputError(detail::error_line(jp, vw + ": needs eye and target"));
+      CameraView cv;
+      cv.name = "view" + std::to_string(i + 1);
+      cv.eye = json_vec3(v["eye"], jp, vw + ": eye");
+      cv.target = json_vec3(v["target"], jp, vw + ": target");
+      if (v.contains("up")) cv.up = json_vec3(v["up"], jp, vw + ": up");
+      if (v.contains("vfov_deg")) {
+        if (!v["vfov_deg"].is_number()) throw InputError(detail::error_line(jp, vw + ": vfov_deg must be a number"));
+        cv.vfov_deg = v["vfov_deg"].get<float>();
+      }
+      if (cv.eye == cv.target) throw InputError(detail::error_line(jp, vw + ": eye equals target"));
+      if (!(cv.vfov_deg > 0.f && cv.vfov_deg < 180.f))
+        throw InputError(detail::error_line(jp, vw + ": vfov_deg must be in (0, 180)"));
+      Vec3 fwd = cv.target - cv.eye;
+      if (length(cross(fwd, cv.up)) <= 1e-6f * length(fwd) * length(cv.up))
+        throw InputError(detail::error_line(jp, vw + ": up is zero or parallel to the view direction"));
+      out.push_back(cv);
+    }
+    return out;
+  }
+  return {};
+}
+
+Scene load_scene_file(const std::string& path) {
+  detail::check_regular_file(path);
+  const std::string ext = lower_extension(path);
+  Scene s;
+  if (ext == ".gltf" || ext == ".glb")
+    s = load_gltf(path);
+  else if (ext == ".obj")
+    s = load_obj(path);
+  else if (ext == ".off")
+    s = load_off(path);
+  else if (ext == ".stl")
+    s = load_stl(path);
+  else if (ext == ".ply")
+    s = load_mesh_openmesh(path);
+  else
+    throw InputError(detail::error_line(
+        path, (ext.empty() ? std::string("file has no extension") : "unknown scene file extension '" + ext + "'") +
+                  " (expected .gltf, .glb, .obj, .ply, .off or .stl)"));
+  s.name = detail::file_stem(path);
+  try {
+    s.validate();
+  } catch (const InputError& e) {
+    throw InputError(detail::error_line(path, e.what()));
+  }
+  // Primitive ids are uint32 and 0xFFFFFFFF means "no hit" (DESIGN.md, hits file).
+  if (s.triangles.size() >= 0xFFFFFFFFull || s.positions.size() >= 0xFFFFFFFFull)
+    throw InputError(detail::error_line(path, "more than 2^32-2 triangles or vertices"));
+  s.views = views_from_scenes_json(path);
+  s.ensure_views();
+  return s;
+}
+
+}  // namespace tb

@@ -1,0 +1,62 @@
+// Small float vector and axis-aligned box: the only math every module shares.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+namespace tb {
+
+struct Vec3 {
+  float x = 0, y = 0, z = 0;
+  constexpr Vec3() = default;
+  constexpr Vec3(float x_, float y_, float z_) : x(x_), y(y_), z(z_) {}
+  constexpr float operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+  float& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
+};
+
+constexpr Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+constexpr Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+constexpr Vec3 operator-(Vec3 a) { return {-a.x, -a.y, -a.z}; }
+constexpr Vec3 operator*(Vec3 a, float s) { return {a.x * s, a.y * s, a.z * s}; }
+constexpr Vec3 operator*(float s, Vec3 a) { return a * s; }
+constexpr Vec3 operator*(Vec3 a, Vec3 b) { return {a.x * b.x, a.y * b.y, a.z * b.z}; }
+constexpr Vec3 operator/(Vec3 a, float s) { return {a.x / s, a.y / s, a.z / s}; }
+constexpr bool operator==(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+inline Vec3& operator+=(Vec3& a, Vec3 b) { a = a + b; return a; }
+constexpr float dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr Vec3 cross(Vec3 a, Vec3 b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline float length(Vec3 a) { return std::sqrt(dot(a, a)); }
+inline Vec3 normalize(Vec3 a) { return a / length(a); }
+inline Vec3 vmin(Vec3 a, Vec3 b) { return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)}; }
+inline Vec3 vmax(Vec3 a, Vec3 b) { return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}; }
+inline bool is_finite(Vec3 a) { return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z); }
+
+struct AABB {
+  Vec3 lo{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+          std::numeric_limits<float>::infinity()};
+  Vec3 hi{-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+          -std::numeric_limits<float>::infinity()};
+  void grow(Vec3 p) { lo = vmin(lo, p); hi = vmax(hi, p); }
+  void grow(const AABB& b) { lo = vmin(lo, b.lo); hi = vmax(hi, b.hi); }
+  bool empty() const { return !(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z); }
+  Vec3 extent() const { return hi - lo; }
+  Vec3 centre() const { return (lo + hi) * 0.5f; }
+  float area() const {
+    if (empty()) return 0.f;
+    Vec3 e = extent();
+    return 2.f * (e.x * e.y + e.y * e.z + e.z * e.x);
+  }
+  bool contains(const AABB& b) const {
+    return lo.x <= b.lo.x && lo.y <= b.lo.y && lo.z <= b.lo.z && hi.x >= b.hi.x && hi.y >= b.hi.y &&
+           hi.z >= b.hi.z;
+  }
+  int longest_axis() const {
+    Vec3 e = extent();
+    return e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
+  }
+};
+
+}  // namespace tb

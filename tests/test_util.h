@@ -1,0 +1,49 @@
+// Shared helpers of the test suites.
+#pragma once
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "harness/accuracy.h"
+#include "harness/experiment.h"
+#include "harness/trace_runner.h"
+#include "structures/builtin_scenes.h"
+#include "traversal/registry.h"
+
+namespace tb::test {
+
+inline WorkloadSpec small_spec(const std::string& workload, uint32_t size = 64, uint32_t view = 0) {
+  WorkloadSpec s = parse_workload(workload);
+  s.width = size;
+  s.height = size;
+  s.view = view;
+  return s;
+}
+
+// Traces `spec` with `scheme` and compares with the reference.
+inline Accuracy accuracy_of(Bench& bench, const std::string& scheme, const WorkloadSpec& spec,
+                            const SchemeConfig& cfg = {}) {
+  auto t = make_scheme(scheme, cfg);
+  t->prepare(bench.scene(), bench.cache());
+  const RayBatch& b = bench.rays(spec);
+  std::vector<Hit> hits(b.size());
+  trace_batch(*t, b, hits, 2);
+  return compare_hits(hits, bench.reference_hits(spec));
+}
+
+// Every registered scheme but the reference itself.
+inline std::vector<std::string> schemes_under_test() {
+  std::vector<std::string> names;
+  for (const auto& s : schemes())
+    if (s.name != "reference") names.push_back(s.name);
+  return names;
+}
+
+inline std::filesystem::path temp_dir(const std::string& name) {
+  auto p = std::filesystem::temp_directory_path() / ("travbench_test_" + name + "_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(p);
+  return p;
+}
+
+}  // namespace tb::test

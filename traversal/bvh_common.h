@@ -1,0 +1,28 @@
+// What every scheme over the binary BVH shares: the cached BVH and its triangles in leaf order.
+#pragma once
+#include <memory>
+
+#include "structures/bvh.h"
+#include "traversal/traverser.h"
+
+namespace tb {
+
+struct BVHData {
+  std::shared_ptr<const BVH> bvh;
+  std::shared_ptr<const TriangleSet> tris;
+};
+
+// BVH build parameters from a scheme's config: `bins`, `leaf_size`.
+BVHBuildParams bvh_params(const SchemeConfig& cfg, int default_leaf = 4);
+// Fetches (building on first use) the BVH and the triangle set the kernel `cfg.kernel` needs.
+BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel);
+
+// Seeds a hit record: the search interval is [ray.tmin, ray.tmax).
+inline Hit initial_hit(const Ray& r) { return Hit{r.tmax, kNoHit, 0.f, 0.f}; }
+// Turns a search record into the reported hit: misses carry t = +inf.
+inline Hit finish_hit(Hit h) {
+  if (h.prim == kNoHit) h.t = INFINITY;
+  return h;
+}
+
+}  // namespace tb

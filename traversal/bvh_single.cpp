@@ -1,0 +1,90 @@
+// bvh_single: one ray at a time through the binary BVH, near child first with a stack of far
+// children and their entry distances (thesis Alg. 2.4); stacked nodes beyond the closest hit
+// found so far are skipped when popped.
+#include "traversal/bvh_common.h"
+
+namespace tb {
+namespace {
+
+class BVHSingle final : public TraverserBase<BVHSingle> {
+ public:
+  explicit BVHSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(bvh_params(cfg)) {}
+  std::string_view name() const override { return "bvh_single"; }
+  void prepare(const Scene& scene, StructureCache& cache) override {
+    data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
+  }
+  std::string structure_info() const override { return data_.bvh->stats.describe(); }
+
+  template <class P>
+  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
+  }
+
+ private:
+  struct Entry {
+    uint32_t node;
+    float dist;
+  };
+
+  template <TriKernel K, class P>
+  void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    const BVH& bvh = *data_.bvh;
+    const TriangleSet& tris = *data_.tris;
+    const BVHNode* nodes = bvh.nodes.data();
+    std::vector<Entry> stack(bvh.stats.max_depth + 2);
+    for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
+      const Ray& ray = batch.rays[i];
+      probe.read(&ray, sizeof(Ray));
+      if constexpr (P::enabled) if (probe.counts) probe.counts->rays++;
+      const RayCtx rc(ray);
+      Hit hit = initial_hit(ray);
+      uint32_t sp = 0;
+      uint32_t node = 0;
+      if (box_entry(rc, nodes[0].lo, nodes[0].hi, ray.tmin, hit.t) == INFINITY) node = UINT32_MAX;
+      while (node != UINT32_MAX) {
+        const BVHNode& n = nodes[node];
+        if (n.is_leaf()) {
+          probe.leaf(&n, sizeof(BVHNode));
+          for (uint32_t k = n.left_first; k < n.left_first + n.count; ++k) {
+            probe.tris(tris.data_at(k, K), TriangleSet::bytes(K));
+            intersect_tri<K>(rc, tris, k, ray.tmin, hit);
+          }
+        } else {
+          probe.node(&n, sizeof(BVHNode));
+          const BVHNode* c = &nodes[n.left_first];
+          float d0 = box_entry(rc, c[0].lo, c[0].hi, ray.tmin, hit.t);
+          float d1 = box_entry(rc, c[1].lo, c[1].hi, ray.tmin, hit.t);
+          uint32_t near = n.left_first, far = n.left_first + 1;
+          if (d1 < d0) { std::swap(d0, d1); std::swap(near, far); }
+          if (d0 != INFINITY) {
+            if (d1 != INFINITY) {
+              stack[sp++] = {far, d1};
+              probe.write(&stack[sp - 1], sizeof(Entry));
+            }
+            node = near;
+            continue;
+          }
+        }
+        // Pop the nearest pending node that may still hold a closer hit.
+        node = UINT32_MAX;
+        while (sp > 0) {
+          const Entry e = stack[--sp];
+          probe.read(&stack[sp], sizeof(Entry));
+          if (e.dist < hit.t) { node = e.node; break; }
+        }
+      }
+      hits[i] = finish_hit(hit);
+      probe.write(&hits[i], sizeof(Hit));
+    }
+  }
+
+  SchemeConfig cfg_;
+  BVHBuildParams params_;
+  BVHData data_;
+};
+
+}  // namespace
+
+std::unique_ptr<Traverser> make_bvh_single(const SchemeConfig& cfg) { return std::make_unique<BVHSingle>(cfg); }
+
+}  // namespace tb

@@ -1,0 +1,68 @@
+#include "traversal/embree_common.h"
+
+#include <cstdio>
+#include <stdexcept>
+
+namespace tb {
+
+namespace {
+void on_error(void*, RTCError code, const char* msg) {
+  std::fprintf(stderr, "travbench: embree error %d: %s\n", int(code), msg ? msg : "");
+}
+}  // namespace
+
+RTCDevice embree_device() {
+  static RTCDevice device = [] {
+    RTCDevice d = rtcNewDevice("threads=1,set_affinity=0");
+    if (!d) throw std::runtime_error("embree: rtcNewDevice failed");
+    rtcSetDeviceErrorFunction(d, on_error, nullptr);
+    return d;
+  }();
+  return device;
+}
+
+EmbreeScene::EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust) {
+  RTCDevice dev = embree_device();
+  scene_ = rtcNewScene(dev);
+  rtcSetSceneFlags(scene_, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+  const RTCBuildQuality q = quality == EmbreeQuality::high     ? RTC_BUILD_QUALITY_HIGH
+                            : quality == EmbreeQuality::medium ? RTC_BUILD_QUALITY_MEDIUM
+                                                               : RTC_BUILD_QUALITY_LOW;
+  rtcSetSceneBuildQuality(scene_, q);
+  RTCGeometry geom = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
+  rtcSetGeometryBuildQuality(geom, q);
+  // Embree may read 16 bytes at the last vertex: allocate through Embree, which pads.
+  auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                        3 * sizeof(float), scene.positions.size()));
+  for (size_t i = 0; i < scene.positions.size(); ++i) {
+    v[3 * i] = scene.positions[i].x;
+    v[3 * i + 1] = scene.positions[i].y;
+    v[3 * i + 2] = scene.positions[i].z;
+  }
+  auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                             3 * sizeof(uint32_t), scene.triangles.size()));
+  for (size_t i = 0; i < scene.triangles.size(); ++i)
+    for (int c = 0; c < 3; ++c) idx[3 * i + c] = scene.triangles[i][c];
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(scene_, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(scene_);
+}
+
+EmbreeScene::~EmbreeScene() {
+  if (scene_) rtcReleaseScene(scene_);
+}
+
+std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, StructureCache& cache,
+                                                      EmbreeQuality quality, bool robust) {
+  const std::string key = "embree:q" + std::to_string(int(quality)) + (robust ? ":robust" : ":fast");
+  return cache.get<EmbreeScene>(key, [&] { return EmbreeScene(scene, quality, robust); });
+}
+
+bool embree_robust(const SchemeConfig& cfg) {
+  int r = cfg.get_int("robust", 1);
+  if (r != 0 && r != 1) throw InputError("parameter robust must be 0 or 1");
+  return r == 1;
+}
+
+}  // namespace tb

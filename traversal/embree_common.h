@@ -1,0 +1,59 @@
+// Embree 3 as the baseline of every comparison. One device per process (one build thread, so
+// build times compare with our single-threaded builders), scenes built at high quality, cached
+// per scene and mode. Robust mode (RTC_SCENE_FLAG_ROBUST) is the default so the baseline leaks
+// no more than our watertight kernels; `--param robust=0` gives Embree's fast default mode.
+#pragma once
+#include <embree3/rtcore.h>
+
+#include <memory>
+#include <string>
+
+#include "traversal/traverser.h"
+
+namespace tb {
+
+enum class EmbreeQuality { low, medium, high };
+
+class EmbreeScene {
+ public:
+  EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust);
+  EmbreeScene(EmbreeScene&& o) noexcept : scene_(o.scene_) { o.scene_ = nullptr; }
+  EmbreeScene(const EmbreeScene&) = delete;
+  ~EmbreeScene();
+  RTCScene get() const { return scene_; }
+
+ private:
+  RTCScene scene_ = nullptr;
+};
+
+RTCDevice embree_device();
+std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, StructureCache& cache,
+                                                      EmbreeQuality quality, bool robust);
+bool embree_robust(const SchemeConfig& cfg);
+
+inline void to_embree(const Ray& r, RTCRayHit& rh) {
+  rh.ray.org_x = r.org.x; rh.ray.org_y = r.org.y; rh.ray.org_z = r.org.z;
+  rh.ray.dir_x = r.dir.x; rh.ray.dir_y = r.dir.y; rh.ray.dir_z = r.dir.z;
+  rh.ray.tnear = r.tmin; rh.ray.tfar = r.tmax;
+  rh.ray.time = 0.f; rh.ray.mask = 0xFFFFFFFFu; rh.ray.id = 0; rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+
+inline Hit from_embree(const RTCRayHit& rh) {
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return Hit{};
+  return Hit{rh.ray.tfar, rh.hit.primID, rh.hit.u, rh.hit.v};
+}
+
+// Base for the three Embree schemes: config and the cached scene.
+class EmbreeTraverserBase {
+ protected:
+  explicit EmbreeTraverserBase(const SchemeConfig& cfg) : robust_(embree_robust(cfg)) {}
+  void prepare_embree(const Scene& scene, StructureCache& cache) {
+    scene_ = fetch_embree_scene(scene, cache, EmbreeQuality::high, robust_);
+  }
+  bool robust_;
+  std::shared_ptr<const EmbreeScene> scene_;
+};
+
+}  // namespace tb

@@ -1,0 +1,57 @@
+// Instrumentation as a compile-time policy (DESIGN.md): every kernel is a template on a probe.
+// NullProbe compiles to nothing, so the timed path pays nothing; Probe counts visits and tests
+// (thesis Table 8/10 "rays per visited node") and can feed a cache simulator.
+#pragma once
+#include <cstdint>
+
+namespace tb {
+namespace cachesim { class Hierarchy; }
+
+struct TraversalCounts {
+  uint64_t rays = 0;             // rays traced
+  uint64_t node_visits = 0;      // interior node visits (a packet or stream visit counts once)
+  uint64_t node_ray_visits = 0;  // sum over interior visits of the active rays at that visit
+  uint64_t leaf_visits = 0;
+  uint64_t leaf_ray_visits = 0;
+  uint64_t tri_tests = 0;        // ray-triangle tests (per ray-triangle pair)
+  void add(const TraversalCounts& o) {
+    rays += o.rays; node_visits += o.node_visits; node_ray_visits += o.node_ray_visits;
+    leaf_visits += o.leaf_visits; leaf_ray_visits += o.leaf_ray_visits; tri_tests += o.tri_tests;
+  }
+};
+
+struct NullProbe {
+  static constexpr bool enabled = false;
+  void node(const void*, uint32_t, uint32_t = 1) {}
+  void leaf(const void*, uint32_t, uint32_t = 1) {}
+  void tris(const void*, uint32_t, uint32_t = 1) {}
+  void read(const void*, uint32_t) {}
+  void write(const void*, uint32_t) {}
+};
+
+// The instrumented path's probe. Either sink may be null.
+class Probe {
+ public:
+  static constexpr bool enabled = true;
+  TraversalCounts* counts = nullptr;
+  cachesim::Hierarchy* cache = nullptr;
+
+  // An interior node of `bytes` bytes at `p` visited by `active` rays at once.
+  void node(const void* p, uint32_t bytes, uint32_t active = 1) {
+    if (counts) { counts->node_visits++; counts->node_ray_visits += active; }
+    if (cache) read(p, bytes);
+  }
+  void leaf(const void* p, uint32_t bytes, uint32_t active = 1) {
+    if (counts) { counts->leaf_visits++; counts->leaf_ray_visits += active; }
+    if (cache) read(p, bytes);
+  }
+  // Triangle data of `bytes` bytes read and tested against `tests` rays.
+  void tris(const void* p, uint32_t bytes, uint32_t tests = 1) {
+    if (counts) counts->tri_tests += tests;
+    if (cache) read(p, bytes);
+  }
+  void read(const void* p, uint32_t bytes);   // rays, hits, stacks, queues
+  void write(const void* p, uint32_t bytes);
+};
+
+}  // namespace tb

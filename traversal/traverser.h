@@ -1,0 +1,55 @@
+// The interface every traversal scheme implements (DESIGN.md core types). A new scheme is one
+// file deriving from TraverserBase plus one line in traversal/registry.cpp.
+#pragma once
+#include <map>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "structures/scene.h"
+#include "structures/structure_cache.h"
+#include "traversal/kernels.h"
+#include "traversal/probe.h"
+#include "workloads/ray_batch.h"
+
+namespace tb {
+
+// Per-scheme options: the triangle kernel (--kernel) and free-form parameters (--param k=v),
+// e.g. `leaf_size=4`, `stream=512`, `queue=384`.
+struct SchemeConfig {
+  TriKernel kernel = TriKernel::watertight;
+  std::map<std::string, std::string> params;
+  int get_int(const std::string& key, int fallback) const;
+};
+
+class Traverser {
+ public:
+  virtual ~Traverser() = default;
+  virtual std::string_view name() const = 0;
+  // Builds or fetches the scheme's structure. Not timed as trace time.
+  virtual void prepare(const Scene& scene, StructureCache& cache) = 0;
+  // The timed path: packets [range.first, range.last) of `batch`; hits[i] belongs to batch.rays[i].
+  // Must be safe to call concurrently on disjoint ranges.
+  virtual void trace(const RayBatch& batch, PacketRange range, std::span<Hit> hits) const = 0;
+  // The instrumented path: same result, with counters and/or cache simulation.
+  virtual void trace(const RayBatch& batch, PacketRange range, std::span<Hit> hits, Probe& probe) const = 0;
+  // One line describing the built structure (nodes, bytes, ...), for logs and the build table.
+  virtual std::string structure_info() const { return {}; }
+};
+
+// Implements both trace entry points with one template: Derived provides
+//   template <class P> void run(const RayBatch&, PacketRange, std::span<Hit>, P& probe) const;
+template <class Derived>
+class TraverserBase : public Traverser {
+ public:
+  void trace(const RayBatch& b, PacketRange r, std::span<Hit> h) const final {
+    NullProbe p;
+    static_cast<const Derived&>(*this).run(b, r, h, p);
+  }
+  void trace(const RayBatch& b, PacketRange r, std::span<Hit> h, Probe& p) const final {
+    static_cast<const Derived&>(*this).run(b, r, h, p);
+  }
+};
+
+}  // namespace tb

@@ -1,0 +1,127 @@
+#include "workloads/ray_file.h"
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "structures/scene.h"
+
+namespace tb {
+namespace {
+
+constexpr char kRayMagic[8] = {'T', 'B', 'R', 'A', 'Y', 'S', '1', '\0'};
+constexpr char kHitMagic[8] = {'T', 'B', 'H', 'I', 'T', 'S', '1', '\0'};
+
+std::ofstream open_out(const std::string& path) {
+  std::ofstream f(path, std::ios::binary);
+  if (!f) throw InputError(path + ": cannot open for writing");
+  return f;
+}
+
+// Opens and sizes a file for reading; rejects directories and unreadable paths.
+std::ifstream open_in(const std::string& path, uint64_t& size) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw InputError(path + ": is a directory, not a file");
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path + ": cannot open for reading");
+  size = std::filesystem::file_size(path, ec);
+  if (ec) throw InputError(path + ": cannot read its size");
+  return f;
+}
+
+template <class T>
+void read_exact(std::ifstream& f, T* data, size_t n, const std::string& path, const char* what) {
+  f.read(reinterpret_cast<char*>(data), std::streamsize(n * sizeof(T)));
+  if (!f) throw InputError(path + ": truncated while reading " + what);
+}
+
+}  // namespace
+
+void write_rays(const std::string& path, const RayBatch& b) {
+  auto f = open_out(path);
+  const uint64_t count = b.rays.size();
+  bool uniform = true;
+  for (uint32_t p = 0; p < b.num_packets(); ++p)
+    uniform &= b.packet_begin[p] == uint64_t(p) * b.packet_size;
+  const uint32_t packet_count = uniform ? 0 : b.num_packets();
+  f.write(kRayMagic, 8);
+  f.write(reinterpret_cast<const char*>(&count), 8);
+  f.write(reinterpret_cast<const char*>(&b.packet_size), 4);
+  f.write(reinterpret_cast<const char*>(&packet_count), 4);
+  for (const Ray& r : b.rays) {
+    const float v[8] = {r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z, r.tmin, r.tmax};
+    f.write(reinterpret_cast<const char*>(v), sizeof v);
+  }
+  if (packet_count) f.write(reinterpret_cast<const char*>(b.packet_begin.data()), (packet_count + 1) * 4);
+  if (!f) throw InputError(path + ": write failed");
+}
+
+RayBatch read_rays(const std::string& path) {
+  uint64_t size = 0;
+  auto f = open_in(path, size);
+  char magic[8];
+  uint64_t count = 0;
+  uint32_t packet_size = 0, packet_count = 0;
+  if (size < 24) throw InputError(path + ": too short for a ray file header (" + std::to_string(size) + " bytes)");
+  read_exact(f, magic, 8, path, "the magic");
+  if (std::memcmp(magic, kRayMagic, 8) != 0) throw InputError(path + ": not a travbench ray file (bad magic)");
+  read_exact(f, &count, 1, path, "the count");
+  read_exact(f, &packet_size, 1, path, "the packet size");
+  read_exact(f, &packet_count, 1, path, "the packet count");
+  const uint64_t expect = 24 + count * 32 + (packet_count ? (uint64_t(packet_count) + 1) * 4 : 0);
+  if (count > (size - 24) / 32 || expect != size)
+    throw InputError(path + ": header says " + std::to_string(count) + " rays and " + std::to_string(packet_count) +
+                     " packets, which needs " + std::to_string(expect) + " bytes, but the file has " +
+                     std::to_string(size));
+  if (packet_size == 0) throw InputError(path + ": packet size is 0");
+  RayBatch b;
+  b.rays.resize(count);
+  for (uint64_t i = 0; i < count; ++i) {
+    float v[8];
+    read_exact(f, v, 8, path, "rays");
+    b.rays[i] = {{v[0], v[1], v[2]}, v[6], {v[3], v[4], v[5]}, v[7]};
+  }
+  if (packet_count) {
+    b.packet_begin.resize(packet_count + 1);
+    read_exact(f, b.packet_begin.data(), packet_count + 1, path, "the packet table");
+    b.packet_size = packet_size;
+  } else {
+    b.group_uniform(packet_size);
+  }
+  b.common_origin = !b.rays.empty();
+  for (const Ray& r : b.rays) b.common_origin &= r.org == b.rays[0].org;
+  try {
+    b.validate();
+  } catch (const InputError& e) {
+    throw InputError(path + ": " + e.what());
+  }
+  return b;
+}
+
+void write_hits(const std::string& path, const std::vector<Hit>& hits) {
+  auto f = open_out(path);
+  const uint64_t count = hits.size();
+  f.write(kHitMagic, 8);
+  f.write(reinterpret_cast<const char*>(&count), 8);
+  f.write(reinterpret_cast<const char*>(hits.data()), std::streamsize(count * sizeof(Hit)));
+  if (!f) throw InputError(path + ": write failed");
+}
+
+std::vector<Hit> read_hits(const std::string& path) {
+  uint64_t size = 0;
+  auto f = open_in(path, size);
+  if (size < 16) throw InputError(path + ": too short for a hit file header");
+  char magic[8];
+  uint64_t count = 0;
+  read_exact(f, magic, 8, path, "the magic");
+  if (std::memcmp(magic, kHitMagic, 8) != 0) throw InputError(path + ": not a travbench hit file (bad magic)");
+  read_exact(f, &count, 1, path, "the count");
+  if (count > (size - 16) / 16 || 16 + count * 16 != size)
+    throw InputError(path + ": header says " + std::to_string(count) + " hits but the file has " +
+                     std::to_string(size) + " bytes");
+  std::vector<Hit> hits(count);
+  read_exact(f, hits.data(), count, path, "hits");
+  return hits;
+}
+
+}  // namespace tb

@@ -1,0 +1,60 @@
+// Generated ray workloads of controlled divergence (thesis §3.4, §5.2.3, §6.2.1).
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "structures/scene.h"
+#include "workloads/ray_batch.h"
+
+namespace tb {
+
+class Traverser;
+
+struct WorkloadSpec {
+  std::string kind;   // primary, divergence, rnd, rnd2, bounce, shadow, hard:*
+  int param = 1;      // D for divergence, k for bounce
+  uint32_t width = 512, height = 512;
+  uint32_t view = 0;  // index into scene.views
+  uint64_t seed = 1;
+  std::string name() const;  // canonical name, e.g. "divergence:8"
+};
+
+// Parses "primary", "divergence:D", "rnd", "rnd2", "bounce:k", "shadow" (and the hard cases);
+// throws InputError naming the problem.
+WorkloadSpec parse_workload(const std::string& text);
+std::vector<std::string> workload_names();
+
+// Generates the rays. Bounce and shadow workloads trace their paths with `reference`
+// (prepared on this scene); the others ignore it. Deterministic given the spec (seed included).
+RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const Traverser& reference);
+
+// Primary rays in 16x16 packets, Fig. 16 layout (thesis §3.3): each packet is four 8x8 quadrants
+// of 64 rays, each quadrant sixteen 2x2 groups. D scales the angle between adjacent rays of a
+// tile around the tile centre (§3.4), so D > 1 tiles overlap and touch the same geometry.
+RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float divergence);
+
+// Pixel of the i-th ray (0..255) of a 16x16 packet in the Fig. 16 layout.
+inline void fig16_pixel(uint32_t i, uint32_t& x, uint32_t& y) {
+  const uint32_t q = i >> 6, g = (i >> 2) & 15, k = i & 3;
+  x = (q & 1) * 8 + (g & 3) * 2 + (k & 1);
+  y = (q >> 1) * 8 + (g >> 2) * 2 + (k >> 1);
+}
+
+// Deterministic per-ray random numbers, independent of threading and generation order.
+struct Rng {
+  uint64_t state;
+  Rng(uint64_t seed, uint64_t stream) : state(seed * 0x9E3779B97F4A7C15ull ^ (stream + 0x632BE59BD9B4E019ull)) {
+    next();
+    next();
+  }
+  uint64_t next() {  // splitmix64
+    uint64_t z = (state += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  float uniform() { return float(next() >> 40) * 0x1p-24f; }  // [0, 1)
+};
+
+}  // namespace tb
