@@ -140,9 +140,11 @@ inline CacheLevel::Outcome CacheLevel::access(uint64_t line, bool write, bool ma
 // Tree-PLRU follows gem5's TreePLRURP exactly: the assoc-1 node bits of a set form a heap-ordered
 // binary tree (node n has children 2n+1, 2n+2; leaf of way w is node w + assoc - 1). A set bit
 // means "the victim is in the right subtree". A touch walks from the leaf to the root and points
-// every node away from the touched way; the victim walk follows the bits from the root. gem5 does
-// not prefer invalid ways; with the all-zero initial tree an empty set fills in the order
-// 0,4,2,6,1,5,3,7 (8 ways) before any valid line is chosen, so nothing is lost by that.
+// every node away from the touched way; the victim walk follows the bits from the root. Like gem5,
+// the walk ignores whether ways are valid: a stream of misses fills an empty 8-way set in the order
+// 0,4,2,6,1,5,3,7, but hits during the first fill can steer it to a valid way while others are
+// still empty (tests/test_cachesim.cpp, EightLinesFitLruButNotTreePlru). That only matters while a
+// set warms up.
 inline uint32_t CacheLevel::victim(uint64_t set) const {
   switch (policy_) {
     case Policy::LRU: {

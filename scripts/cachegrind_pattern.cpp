@@ -4,6 +4,7 @@
 // cache simulators see the same address stream.
 //
 //   cachegrind_pattern run          performs the accesses, prints a checksum
+//   cachegrind_pattern idle         the same process without the accesses (start-up baseline)
 //   cachegrind_pattern din [BASE]   prints the din trace, buffer placed at hex BASE (default 10000000)
 //
 // The buffer comes from mmap, so it reads as zeros without any user-space initialisation that
@@ -45,40 +46,65 @@ struct Lcg {  // Numerical Recipes LCG; the high bits are used
   ALWAYS_INLINE uint32_t next() { return s = s * 1664525u + 1013904223u; }
 };
 
+constexpr size_t KB = size_t{1} << 10, MB = size_t{1} << 20;
+
+// Every phase is built so that the geometry or the replacement policy decides its miss count
+// (the comments give the count for a 32 KB 8-way D1 and a 2 MB 16-way LL, both LRU): a wrong set
+// index, associativity, size or policy in either simulator moves the totals by several percent.
 template <class Sink>
 void pattern(Sink& sink) {
-  // 1. Store sweep, one store per 64-byte line over 1 MB, four times: larger than D1 (every store
-  //    misses D1), smaller than LL (only the first pass misses LL).
+  // 1. Store sweep, one store per 64-byte line over 1 MB, four times: every store misses D1; only
+  //    the first pass misses LL (16384).
   for (uint32_t pass = 0; pass < 4; ++pass)
-    for (size_t off = 0; off < (size_t{1} << 20); off += 64) sink.write(off, pass);
+    for (size_t off = 0; off < 1 * MB; off += 64) sink.write(off, pass);
 
-  // 2. Twelve lines 4 KB apart share one D1 set; cycling through them misses D1 every time under
-  //    LRU (12 > 8 ways) but hits LL after the first round.
+  // 2. In each of the 64 D1 sets, the sequence of lines 4 1 0 3 8 1 2 1 6 5 (4 KB apart): eight
+  //    distinct lines, so LRU keeps them all after the cold misses, while tree-PLRU misses half the
+  //    accesses and a 4-way cache most of them.
+  //    The sequence is packed in a register-sized constant, one hex digit per access (first access
+  //    in the lowest digit): a table in memory would itself occupy a D1 line in one of the sets.
+  constexpr uint64_t kSeq = 0x5612183014;
+  for (uint32_t round = 0; round < 300; ++round)
+    for (size_t set = 0; set < 64; ++set)
+      for (uint32_t j = 0; j < 10; ++j) sink.read(1 * MB + (kSeq >> (4 * j) & 15) * 4 * KB + set * 64);
+
+  // 3. Twelve lines 4 KB apart cycled: more than 8 ways, so D1 misses every time; LL hits.
   for (uint32_t round = 0; round < 2000; ++round)
-    for (size_t k = 0; k < 12; ++k) sink.read((size_t{2} << 20) + k * 4096);
+    for (size_t k = 0; k < 12; ++k) sink.read(3 * MB / 2 + k * 4 * KB);
 
-  // 3. Sequential word reads over 16 KB, twenty times: D1 hits after the first pass.
-  for (uint32_t pass = 0; pass < 20; ++pass)
-    for (size_t off = 0; off < (size_t{16} << 10); off += 4) sink.read((size_t{3} << 20) + off);
-
-  // 4. Pseudo-random word reads over the whole 8 MB: D1 misses almost always, LL about 3 in 4.
   Lcg rng{12345};
-  for (uint32_t i = 0; i < 1000000; ++i) sink.read((rng.next() >> 8) % (kBufferBytes / 4) * 4);
+  // 4. Random words within 24 KB: fits D1 (cold misses only), would not fit 16 KB.
+  for (uint32_t i = 0; i < 200000; ++i) sink.read(2 * MB + (rng.next() >> 8) % (24 * KB / 4) * 4);
 
-  // 5. Pseudo-random read-then-store pairs within 512 KB (different words, so no compiler or
-  //    cachegrind read-modify-write folding): fits LL, not D1.
-  for (uint32_t i = 0; i < 200000; ++i) {
-    const size_t a = (rng.next() >> 8) % ((size_t{512} << 10) / 4) * 4;
-    const size_t b = (rng.next() >> 8) % ((size_t{512} << 10) / 4) * 4;
-    sink.read((size_t{4} << 20) + a);
-    sink.write((size_t{4} << 20) + b, i);
+  // 5. Lines 256 KB apart share one LL set (and one D1 set) for any LL of 2 MB with up to 16 ways:
+  //    16 of them cycled fit a 16-way LL (hits after the first round; 8 ways would thrash), 20 of
+  //    them miss LL every time.
+  for (uint32_t round = 0; round < 3000; ++round)
+    for (size_t k = 0; k < 16; ++k) sink.read(192 + k * 256 * KB);
+  for (uint32_t round = 0; round < 3000; ++round)
+    for (size_t k = 0; k < 20; ++k) sink.read(128 + k * 256 * KB);
+
+  // 6. Random words within 1.5 MB: fits LL, not D1.
+  for (uint32_t i = 0; i < 300000; ++i) sink.read(6 * MB + (rng.next() >> 8) % (3 * MB / 2 / 4) * 4);
+
+  // 7. Random words over the whole 8 MB: D1 misses almost always, LL about 3 in 4.
+  for (uint32_t i = 0; i < 200000; ++i) sink.read((rng.next() >> 8) % (kBufferBytes / 4) * 4);
+
+  // 8. Random read-then-store pairs within 512 KB (different words, so neither the compiler nor
+  //    cachegrind sees a read-modify-write instruction): fits LL, not D1.
+  for (uint32_t i = 0; i < 100000; ++i) {
+    const size_t a = (rng.next() >> 8) % (512 * KB / 4) * 4;
+    const size_t b = (rng.next() >> 8) % (512 * KB / 4) * 4;
+    sink.read(15 * MB / 2 + a);
+    sink.write(15 * MB / 2 + b, i);
   }
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc >= 2 && std::strcmp(argv[1], "run") == 0) {
+  const bool idle = argc >= 2 && std::strcmp(argv[1], "idle") == 0;
+  if (argc >= 2 && (std::strcmp(argv[1], "run") == 0 || idle)) {
     const size_t span = kBufferBytes + kAlign;
     void* mem = mmap(nullptr, span, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (mem == MAP_FAILED) {
@@ -87,7 +113,7 @@ int main(int argc, char** argv) {
     }
     const uintptr_t aligned = (reinterpret_cast<uintptr_t>(mem) + kAlign - 1) & ~(kAlign - 1);
     RealSink sink{reinterpret_cast<volatile uint32_t*>(aligned)};
-    pattern(sink);
+    if (!idle) pattern(sink);
     std::printf("checksum %u\n", sink.sum);
     munmap(mem, span);
     return 0;
@@ -103,6 +129,6 @@ int main(int argc, char** argv) {
     pattern(sink);
     return 0;
   }
-  std::fprintf(stderr, "usage: cachegrind_pattern run | din [HEX_BASE]\n");
+  std::fprintf(stderr, "usage: cachegrind_pattern run | idle | din [HEX_BASE]\n");
   return 2;
 }

@@ -265,7 +265,7 @@ class Builder {
       for (size_t i = 0; i < idx.count; ++i) {
         uint32_t v = idx.data ? read_index(idx.data + i * idx.stride, idx.component) : 0u;
         if (v >= pos.count)
-          throw InputError(error_line(path_, wi + "index " + std::to_string(i) + " is " + std::to_string(v) +
+          throw InputError(error_line(path_, where + "index " + std::to_string(i) + " is " + std::to_string(v) +
                                                  ", out of range for " + std::to_string(pos.count) + " vertices"));
         seq[i] = v;
       }

@@ -1,24 +1,26 @@
-// Polygon mesh files: OBJ, OFF and STL with small parsers of our own, PLY through OpenMesh.
+// Polygon mesh files: OBJ, OFF, STL and PLY with small parsers of our own; OpenMesh's readers as
+// an independent second reading (load_mesh_openmesh) that the tests compare them against.
 //
-// Why not OpenMesh for everything (the design card's first plan): measured on OpenMesh 9.0
-// (Debian 12), its readers change primitive ids or accept broken files silently:
+// Why not OpenMesh for loading (the design card's first plan): measured on OpenMesh 9.0 (Debian 12),
+// its readers change primitive ids, accept broken files silently, or take the process down:
 //  - OBJ: a face with a repeated vertex ("f 1 2 2") is dropped, shifting every later triangle id;
-//    "v nan 0 0" is skipped, shifting every later vertex index; loading through TriMesh adds
-//    connectivity checks that drop nothing on the shared scenes but print a "complex edge" line per
-//    non-manifold face and duplicate vertices. It is also ~6x slower than the parser below.
+//    "v nan 0 0" is skipped, shifting every later vertex index; through TriMesh, non-manifold faces
+//    print "complex edge" and get duplicated vertices. It is also ~5x slower than the parser below.
+//    (On the shared scenes, which have no such faces, it reads the same triangles: see the tests.)
 //  - STL: facets with two equal corners are dropped; a truncated ASCII file loads without complaint.
 //  - OFF: '#' comments make the reader run on uninitialised counts (thousands of garbage faces);
 //    truncated files yield faces made of stale indices.
-// Correct ids are the point of a traversal benchmark (hits are compared by primitive id), so these
-// three simple formats get exact parsers with line-numbered errors. PLY (ASCII and binary, any
-// property layout) is where a library earns its keep: it goes through OpenMesh's reader, feeding a
-// triangle-soup importer (no connectivity, so nothing is dropped or duplicated) and checked against
-// the counts in the PLY header, the stream state (truncation) and the index range.
+//  - PLY: truncated files are padded with stale values and reported as read; one corrupt byte in
+//    the header (a non-numeric version or count) makes its header loop print forever; one corrupt
+//    byte in an ASCII list length ("-4") makes it allocate until the kernel kills the process.
+// Correct ids are the point of a traversal benchmark (hits are compared by primitive id) and bad
+// input must be an InputError, so every format gets an exact parser with located messages.
 #include <OpenMesh/Core/IO/IOManager.hh>
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/IO/importer/BaseImporter.hh>
 #include <OpenMesh/Core/System/omstream.hh>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -26,7 +28,6 @@
 #include <fstream>
 #include <limits>
 #include <mutex>
-#include <optional>
 #include <sstream>
 #include <string_view>
 #include <unordered_map>
@@ -40,7 +41,7 @@ namespace {
 using detail::error_line;
 
 // ---------------------------------------------------------------------------------------------
-// Text helpers shared by the OBJ, OFF and ASCII STL parsers.
+// Text helpers shared by the OBJ, OFF, ASCII STL and ASCII PLY parsers.
 
 inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
@@ -475,7 +476,292 @@ Scene parse_stl(const std::string& path, const std::string& data) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// OpenMesh (PLY)
+// PLY: header (strict) and body (ASCII, binary little/big endian; any element/property layout; the
+// vertex element's x, y, z and the face element's vertex_indices list are kept).
+
+enum class PlyType { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+
+struct PlyProperty {
+  std::string name;
+  PlyType type;                  // value type (of the entries, for a list)
+  bool list = false;
+  PlyType count_type = PlyType::UInt8;
+};
+
+struct PlyElement {
+  std::string name;
+  uint64_t count = 0;
+  std::vector<PlyProperty> props;
+};
+
+struct PlyHeader {
+  enum Format { Ascii, BinaryLE, BinaryBE } format = Ascii;
+  std::vector<PlyElement> elements;
+  size_t body = 0;  // byte offset of the first element
+  const PlyElement* find(const std::string& name) const {
+    for (const auto& e : elements)
+      if (e.name == name) return &e;
+    return nullptr;
+  }
+};
+
+bool ply_type(const std::string& t, PlyType& out) {
+  static const std::pair<const char*, PlyType> kTypes[] = {
+      {"char", PlyType::Int8},     {"int8", PlyType::Int8},       {"uchar", PlyType::UInt8},
+      {"uint8", PlyType::UInt8},   {"short", PlyType::Int16},     {"int16", PlyType::Int16},
+      {"ushort", PlyType::UInt16}, {"uint16", PlyType::UInt16},   {"int", PlyType::Int32},
+      {"int32", PlyType::Int32},   {"uint", PlyType::UInt32},     {"uint32", PlyType::UInt32},
+      {"float", PlyType::Float32}, {"float32", PlyType::Float32}, {"double", PlyType::Float64},
+      {"float64", PlyType::Float64}};
+  for (const auto& [name, type] : kTypes)
+    if (t == name) {
+      out = type;
+      return true;
+    }
+  return false;
+}
+
+size_t ply_size(PlyType t) {
+  switch (t) {
+    case PlyType::Int8:
+    case PlyType::UInt8: return 1;
+    case PlyType::Int16:
+    case PlyType::UInt16: return 2;
+    case PlyType::Int32:
+    case PlyType::UInt32:
+    case PlyType::Float32: return 4;
+    case PlyType::Float64: return 8;
+  }
+  return 1;
+}
+
+bool is_ply_name(const std::string& t) {
+  if (t.empty()) return false;
+  for (char c : t)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.')) return false;
+  return true;
+}
+
+// Strict on purpose: besides our own reader, the header also gates OpenMesh's (load_mesh_openmesh),
+// whose header parser reads tokens with operator>> and never leaves its loop once the stream has
+// failed (a non-numeric count or version is enough).
+PlyHeader parse_ply_header(const std::string& path, const std::string& data) {
+  PlyHeader h;
+  LineReader lines{data.data(), data.data() + std::min<size_t>(data.size(), 1 << 20)};
+  std::string_view raw;
+  auto bad = [&](const std::string& what) {
+    return InputError(error_line(path, "PLY header line " + std::to_string(lines.line) + ": " + what));
+  };
+  while (lines.next(raw)) {
+    std::string line(raw);
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (lines.line == 1) {
+      if (line != "ply" && line != "PLY") throw InputError(error_line(path, "not a PLY file (first line is not 'ply')"));
+      continue;
+    }
+    for (char ch : line)
+      if (static_cast<unsigned char>(ch) < 32 && ch != '\t') throw bad("control character in the header");
+    std::istringstream ls(line);
+    std::vector<std::string> tok;
+    for (std::string t; ls >> t;) tok.push_back(t);
+    if (tok.empty()) throw bad("empty line");
+    const std::string& kw = tok[0];
+    if (lines.line == 2) {
+      if (tok.size() != 3 || kw != "format" || tok[2] != "1.0") throw bad("expected 'format <ascii|binary_little_endian|binary_big_endian> 1.0'");
+      if (tok[1] == "ascii") h.format = PlyHeader::Ascii;
+      else if (tok[1] == "binary_little_endian") h.format = PlyHeader::BinaryLE;
+      else if (tok[1] == "binary_big_endian") h.format = PlyHeader::BinaryBE;
+      else throw bad("unknown format '" + tok[1].substr(0, 40) + "'");
+      continue;
+    }
+    if (kw == "end_header") {
+      if (tok.size() != 1) throw bad("text after end_header");
+      h.body = static_cast<size_t>(lines.p - data.data());
+      return h;
+    }
+    if (kw == "comment") continue;
+    if (kw == "obj_info") {
+      // OpenMesh reads these word by word as unknown keywords: harmless unless a word is a keyword.
+      for (size_t i = 1; i < tok.size(); ++i)
+        if (tok[i] == "element" || tok[i] == "property" || tok[i] == "comment" || tok[i] == "end_header")
+          throw bad("obj_info line contains the keyword '" + tok[i] + "'");
+      continue;
+    }
+    if (kw == "element") {
+      if (tok.size() != 3 || !is_ply_name(tok[1]) || tok[2].empty() ||
+          tok[2].find_first_not_of("0123456789") != std::string::npos || tok[2].size() > 10 ||
+          std::stoull(tok[2]) > 0xFFFFFFFFull)
+        throw bad("malformed element declaration (expected 'element <name> <count>')");
+      h.elements.push_back({tok[1], std::stoull(tok[2]), {}});
+      continue;
+    }
+    if (kw == "property") {
+      if (h.elements.empty()) throw bad("property before any element");
+      PlyProperty prop;
+      if (tok.size() == 3 && ply_type(tok[1], prop.type) && is_ply_name(tok[2])) {
+        prop.name = tok[2];
+      } else if (tok.size() == 5 && tok[1] == "list" && ply_type(tok[2], prop.count_type) &&
+                 ply_type(tok[3], prop.type) && is_ply_name(tok[4])) {
+        prop.list = true;
+        prop.name = tok[4];
+        if (prop.count_type == PlyType::Float32 || prop.count_type == PlyType::Float64)
+          throw bad("list count type must be an integer type");
+      } else {
+        throw bad("malformed property declaration");
+      }
+      h.elements.back().props.push_back(prop);
+      continue;
+    }
+    throw bad("unknown keyword '" + kw.substr(0, 40) + "'");
+  }
+  throw InputError(error_line(path, "PLY header has no 'end_header' line (truncated or not a PLY file)"));
+}
+
+// Reads the values of the body in declaration order, whatever the encoding.
+class PlyValues {
+ public:
+  PlyValues(const std::string& path, const std::string& data, const PlyHeader& h)
+      : path_(path), p_(data.data() + h.body), end_(data.data() + data.size()), format_(h.format) {}
+
+  double next(PlyType t, const char* what) {
+    if (format_ == PlyHeader::Ascii) return next_ascii(t, what);
+    const size_t n = ply_size(t);
+    if (static_cast<size_t>(end_ - p_) < n)
+      throw InputError(error_line(path_, std::string("file ends inside ") + what + " (truncated?)"));
+    unsigned char b[8];
+    std::memcpy(b, p_, n);
+    p_ += n;
+    if (format_ == PlyHeader::BinaryBE) std::reverse(b, b + n);  // the hosts we build for are little-endian
+    switch (t) {
+      case PlyType::Int8: return static_cast<int8_t>(b[0]);
+      case PlyType::UInt8: return b[0];
+      case PlyType::Int16: { int16_t v; std::memcpy(&v, b, 2); return v; }
+      case PlyType::UInt16: { uint16_t v; std::memcpy(&v, b, 2); return v; }
+      case PlyType::Int32: { int32_t v; std::memcpy(&v, b, 4); return v; }
+      case PlyType::UInt32: { uint32_t v; std::memcpy(&v, b, 4); return v; }
+      case PlyType::Float32: { float v; std::memcpy(&v, b, 4); return v; }
+      case PlyType::Float64: { double v; std::memcpy(&v, b, 8); return v; }
+    }
+    return 0;
+  }
+  size_t remaining() const { return static_cast<size_t>(end_ - p_); }
+
+ private:
+  double next_ascii(PlyType t, const char* what) {
+    while (p_ < end_ && (is_blank(*p_) || *p_ == '\n')) ++p_;
+    if (p_ >= end_) throw InputError(error_line(path_, std::string("file ends inside ") + what + " (truncated?)"));
+    const char* b = p_;
+    while (p_ < end_ && !is_blank(*p_) && *p_ != '\n') ++p_;
+    const std::string_view tok(b, static_cast<size_t>(p_ - b));
+    if (t == PlyType::Float32 || t == PlyType::Float64) {
+      float f;
+      if (!parse_float(tok, f))
+        throw InputError(error_line(path_, std::string(what) + ": " + quote(tok) + " is not a number"));
+      return f;
+    }
+    long long v;
+    if (!parse_int_prefix(tok, v, nullptr))
+      throw InputError(error_line(path_, std::string(what) + ": " + quote(tok) + " is not an integer"));
+    return static_cast<double>(v);
+  }
+
+  const std::string& path_;
+  const char* p_;
+  const char* end_;
+  PlyHeader::Format format_;
+};
+
+Scene parse_ply(const std::string& path, const std::string& data) {
+  const PlyHeader h = parse_ply_header(path, data);
+  const PlyElement* ve = h.find("vertex");
+  const PlyElement* fe = h.find("face");
+  if (!ve) throw InputError(error_line(path, "PLY file declares no 'vertex' element"));
+  if (!fe || fe->count == 0)
+    throw InputError(error_line(path, "PLY file declares no faces (only the 'face' element is read; "
+                                      "'tristrips' and point clouds are not supported)"));
+  int ix = -1, iy = -1, iz = -1, iface = -1;
+  for (size_t i = 0; i < ve->props.size(); ++i) {
+    const auto& pr = ve->props[i];
+    if (pr.list) continue;
+    if (pr.name == "x") ix = static_cast<int>(i);
+    if (pr.name == "y") iy = static_cast<int>(i);
+    if (pr.name == "z") iz = static_cast<int>(i);
+  }
+  if (ix < 0 || iy < 0 || iz < 0) throw InputError(error_line(path, "PLY vertex element lacks an x, y or z property"));
+  for (size_t i = 0; i < fe->props.size(); ++i)
+    if (fe->props[i].list && (fe->props[i].name == "vertex_indices" || fe->props[i].name == "vertex_index"))
+      iface = static_cast<int>(i);
+  if (iface < 0) throw InputError(error_line(path, "PLY face element lacks a vertex_indices list"));
+  if (ve->count >= kMaxElements) throw InputError(error_line(path, "more than 2^32-2 vertices"));
+
+  // Each element item takes at least one byte (binary) or two (ASCII value + separator); larger
+  // counts are a wrong header or a cut file and must not become huge reservations.
+  const size_t body = data.size() - h.body;
+  for (const auto& e : h.elements)
+    if (!e.props.empty() && e.count > body)
+      throw InputError(error_line(path, "header declares " + std::to_string(e.count) + " '" + e.name +
+                                            "' elements, more than the " + std::to_string(body) +
+                                            "-byte body can hold (truncated?)"));
+
+  Scene s;
+  s.name = detail::file_stem(path);
+  s.positions.reserve(ve->count);
+  s.triangles.reserve(fe->count);
+  PlyValues in(path, data, h);
+  std::vector<uint32_t> face;
+  for (const PlyElement& e : h.elements) {
+    const bool is_v = &e == ve, is_f = &e == fe;
+    for (uint64_t item = 0; item < e.count; ++item) {
+      Vec3 p;
+      for (size_t pi = 0; pi < e.props.size(); ++pi) {
+        const PlyProperty& pr = e.props[pi];
+        if (!pr.list) {
+          const double v = in.next(pr.type, is_v ? "a vertex" : (is_f ? "a face" : "an element"));
+          if (is_v) {
+            if (static_cast<int>(pi) == ix) p.x = static_cast<float>(v);
+            if (static_cast<int>(pi) == iy) p.y = static_cast<float>(v);
+            if (static_cast<int>(pi) == iz) p.z = static_cast<float>(v);
+          }
+          continue;
+        }
+        const double count = in.next(pr.count_type, "a list length");
+        if (count < 0 || count > static_cast<double>(in.remaining()))
+          throw InputError(error_line(path, e.name + " " + std::to_string(item) + ": list length " +
+                                                std::to_string(static_cast<long long>(count)) +
+                                                " is negative or longer than the rest of the file"));
+        const size_t n = static_cast<size_t>(count);
+        const bool indices = is_f && static_cast<int>(pi) == iface;
+        if (indices) face.clear();
+        for (size_t k = 0; k < n; ++k) {
+          const double v = in.next(pr.type, indices ? "a face" : "a list");
+          if (!indices) continue;
+          if (!(v >= 0 && v < static_cast<double>(ve->count)) || v != std::floor(v))
+            throw InputError(error_line(path, "face " + std::to_string(item) + " uses vertex index " +
+                                                  std::to_string(static_cast<long long>(v)) + " but there are " +
+                                                  std::to_string(ve->count) + " vertices"));
+          face.push_back(static_cast<uint32_t>(v));
+        }
+        if (indices) {
+          if (face.size() < 3)
+            throw InputError(error_line(path, "face " + std::to_string(item) + " has " + std::to_string(face.size()) +
+                                                  " vertices, needs at least 3"));
+          for (size_t i = 2; i < face.size(); ++i) s.triangles.push_back({face[0], face[i - 1], face[i]});
+          if (s.triangles.size() > kMaxElements) throw InputError(error_line(path, "more than 2^32-2 triangles"));
+        }
+      }
+      if (is_v) {
+        if (!is_finite(p))
+          throw InputError(error_line(path, "vertex " + std::to_string(item) + " has a NaN or Inf coordinate"));
+        s.positions.push_back(p);
+      }
+    }
+  }
+  // Anything after the last element (trailing newline, padding) carries no geometry.
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// OpenMesh: the second reading (load_mesh_openmesh)
 
 // Receives what an OpenMesh reader parses and keeps it as a triangle soup in reading order:
 // polygons are fanned (v0, v{i-1}, v{i}) like everything else; no connectivity is built, so the
@@ -489,13 +775,19 @@ class SoupImporter final : public OpenMesh::IO::BaseImporter {
   using Vec3f = OpenMesh::Vec3f;
   using Vec3d = OpenMesh::Vec3d;
 
+  // Thrown out of the reader when it produces more elements than the file declares or can hold, so
+  // that a reader misled by a corrupt file stops instead of growing the scene without bound.
+  struct TooMuch {};
+
   Scene& scene;
   size_t polygons = 0;
+  size_t max_vertices, max_polygons;
   std::string error;  // first problem seen; readers keep going, so the loader reports it afterwards
 
-  explicit SoupImporter(Scene& s) : scene(s) {}
+  SoupImporter(Scene& s, size_t max_v, size_t max_p) : scene(s), max_vertices(max_v), max_polygons(max_p) {}
 
   VertexHandle add_vertex(const Vec3f& p) override {
+    if (scene.positions.size() >= max_vertices) throw TooMuch{};
     scene.positions.push_back({p[0], p[1], p[2]});
     return VertexHandle(static_cast<int>(scene.positions.size() - 1));
   }
@@ -506,6 +798,7 @@ class SoupImporter final : public OpenMesh::IO::BaseImporter {
       scene.positions[static_cast<size_t>(vh.idx())] = {p[0], p[1], p[2]};
   }
   FaceHandle add_face(const VHandles& v) override {
+    if (polygons >= max_polygons) throw TooMuch{};
     const size_t poly = polygons++;
     if (v.size() < 3) {
       note("face " + std::to_string(poly) + " has " + std::to_string(v.size()) + " vertices, needs at least 3");
@@ -574,121 +867,84 @@ class SoupImporter final : public OpenMesh::IO::BaseImporter {
   }
 };
 
-// OpenMesh reports problems by printing to its global omerr/omlog/omout streams. While a file is
-// read they go into a buffer instead: nothing leaks onto the console, and the text can go into the
-// InputError. The streams are process-wide, hence the mutex.
-class OmCapture {
+// OpenMesh reports problems by printing to its global omerr/omlog/omout streams ("complex edge",
+// "Unsupported keyword", ...); our checks report them as InputError instead, so the streams are
+// muted while a file is read. (Redirecting them into a buffer would need mostream::disconnect,
+// which leaks its target object on every call.) The streams are process-wide, hence the mutex.
+class OmSilence {
  public:
-  OmCapture() : lock_(mutex()) {
+  OmSilence() : lock_(mutex()) {
     for (OpenMesh::mostream* s : {&omerr(), &omlog(), &omout()}) {
       s->flush();
-      Saved sv{s, s->disconnect(std::cerr), s->disconnect(std::clog), s->disconnect(std::cout)};
-      s->connect(buf_);
-      saved_.push_back(sv);
+      saved_.push_back({s, s->is_enabled()});
+      s->disable();
     }
   }
-  ~OmCapture() {
-    for (const Saved& sv : saved_) {
-      sv.stream->flush();
-      sv.stream->disconnect(buf_);
-      if (sv.cerr) sv.stream->connect(std::cerr);
-      if (sv.clog) sv.stream->connect(std::clog);
-      if (sv.cout) sv.stream->connect(std::cout);
+  ~OmSilence() {
+    for (const auto& [stream, enabled] : saved_) {
+      stream->flush();  // drops what was buffered while muted
+      if (enabled) stream->enable();
     }
-  }
-  // First line of what OpenMesh printed, or "" when it said nothing.
-  std::string first_message() {
-    for (const Saved& sv : saved_) sv.stream->flush();
-    std::istringstream in(buf_.str());
-    std::string l;
-    while (std::getline(in, l))
-      if (l.find_first_not_of(" \t\r") != std::string::npos) return l.substr(0, 200);
-    return "";
   }
 
  private:
-  struct Saved {
-    OpenMesh::mostream* stream;
-    bool cerr, clog, cout;
-  };
   static std::mutex& mutex() {
     static std::mutex m;
     return m;
   }
   std::lock_guard<std::mutex> lock_;
-  std::ostringstream buf_;
-  std::vector<Saved> saved_;
+  std::vector<std::pair<OpenMesh::mostream*, bool>> saved_;
 };
-
-// Element counts from a PLY header, so that faces a reader skips or invents are noticed.
-struct PlyCounts {
-  long long vertices = -1, faces = -1;
-};
-
-PlyCounts read_ply_header(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::string line;
-  PlyCounts c;
-  size_t n = 0, bytes = 0;
-  while (std::getline(in, line)) {
-    ++n;
-    bytes += line.size() + 1;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (n == 1 && line != "ply") throw InputError(error_line(path, "not a PLY file (first line is not 'ply')"));
-    if (line == "end_header") return c;
-    std::istringstream ls(line);
-    std::string kw, name;
-    long long count;
-    if (ls >> kw && kw == "element") {
-      if (!(ls >> name >> count) || count < 0)
-        throw InputError(error_line(path, "PLY header line " + std::to_string(n) + " is a malformed element declaration"));
-      if (name == "vertex") c.vertices = count;
-      if (name == "face") c.faces = count;
-    }
-    if (bytes > (1u << 20)) break;  // a real header is a few hundred bytes
-  }
-  throw InputError(error_line(path, "PLY header has no 'end_header' line (truncated or not a PLY file)"));
-}
 
 }  // namespace
 
 Scene load_obj(const std::string& path) { return parse_obj(path, detail::read_file_bytes(path)); }
 Scene load_off(const std::string& path) { return parse_off(path, detail::read_file_bytes(path)); }
 Scene load_stl(const std::string& path) { return parse_stl(path, detail::read_file_bytes(path)); }
+Scene load_ply(const std::string& path) { return parse_ply(path, detail::read_file_bytes(path)); }
 
 Scene load_mesh_openmesh(const std::string& path) {
   detail::check_regular_file(path);
   std::string ext = std::filesystem::path(path).extension().string();
   if (!ext.empty()) ext.erase(0, 1);
   for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  if (ext.empty() || !OpenMesh::IO::IOManager().can_read(ext))
+  // (IOManager::can_read is no help here: for PLY/OFF/OM it probes a dummy file name and says no.)
+  static const char* const kOpenMeshExtensions[] = {"obj", "off", "om", "ply", "stl", "stla", "stlb"};
+  if (std::find(std::begin(kOpenMeshExtensions), std::end(kOpenMeshExtensions), ext) == std::end(kOpenMeshExtensions))
     throw InputError(error_line(path, "OpenMesh has no reader for extension '" + ext + "'"));
 
   const bool is_ply = ext == "ply";
-  PlyCounts declared;
+  long long declared_vertices = -1, declared_faces = -1;
   if (is_ply) {
-    declared = read_ply_header(path);
-    if (declared.vertices < 0) throw InputError(error_line(path, "PLY file declares no 'vertex' element"));
-    if (declared.faces <= 0)
-      throw InputError(error_line(path, "PLY file declares no faces (only the 'face' element is read; "
-                                        "'tristrips' and point clouds are not supported)"));
+    // OpenMesh's PLY reader must only see headers it is sure to parse (see parse_ply_header), and
+    // its element counts are what the reader's output is checked against.
+    const PlyHeader h = parse_ply_header(path, detail::read_file_bytes(path));
+    const PlyElement* ve = h.find("vertex");
+    const PlyElement* fe = h.find("face");
+    if (!ve) throw InputError(error_line(path, "PLY file declares no 'vertex' element"));
+    if (!fe || fe->count == 0) throw InputError(error_line(path, "PLY file declares no faces"));
+    declared_vertices = static_cast<long long>(ve->count);
+    declared_faces = static_cast<long long>(fe->count);
     // Every element needs at least one byte; larger counts must not reach OpenMesh's allocations.
     const auto size = static_cast<long long>(std::filesystem::file_size(path));
-    if (declared.vertices + declared.faces > size)
-      throw InputError(error_line(path, "PLY header declares " + std::to_string(declared.vertices) + " vertices and " +
-                                            std::to_string(declared.faces) + " faces, more than a " +
+    if (declared_vertices + declared_faces > size)
+      throw InputError(error_line(path, "PLY header declares " + std::to_string(declared_vertices) + " vertices and " +
+                                            std::to_string(declared_faces) + " faces, more than a " +
                                             std::to_string(size) + "-byte file can hold (truncated?)"));
   }
 
   Scene s;
   s.name = detail::file_stem(path);
-  SoupImporter importer(s);
+  // Limits: the PLY header's counts; otherwise one element per byte of file, which no real file of
+  // these formats reaches.
+  const auto file_bytes = static_cast<size_t>(std::filesystem::file_size(path));
+  SoupImporter importer(s, is_ply ? static_cast<size_t>(declared_vertices) : file_bytes,
+                        is_ply ? static_cast<size_t>(declared_faces) : file_bytes);
   OpenMesh::IO::Options opt;
   bool ok = false;
   bool stream_failed = false;
-  std::string om_message;
   {
-    OmCapture capture;
+    OmSilence silence;
     try {
       if (is_ply) {
         // The stream overload lets us see whether the reader ran out of data (failbit): OpenMesh's
@@ -699,21 +955,24 @@ Scene load_mesh_openmesh(const std::string& path) {
       } else {
         ok = OpenMesh::IO::IOManager().read(path, importer, opt);
       }
+    } catch (const SoupImporter::TooMuch&) {
+      throw InputError(error_line(path, "OpenMesh's reader produced more vertices or faces than the " +
+                                            std::string(is_ply ? "header declares" : "file can hold") + " (corrupt file?)"));
     } catch (const std::exception& e) {
       throw InputError(error_line(path, std::string("OpenMesh failed to read the file (") + e.what() + ")"));
     }
-    om_message = capture.first_message();
   }
-  if (!ok)
-    throw InputError(error_line(path, "OpenMesh could not read the file" + (om_message.empty() ? "" : ": " + om_message)));
+  // A failed stream explains everything after it (OpenMesh keeps "reading" stale values), so it is
+  // reported first.
+  if (stream_failed)
+    throw InputError(error_line(path, "file ends early or holds a value that is not a number (truncated?)"));
+  if (!ok) throw InputError(error_line(path, "OpenMesh could not read the file"));
   if (!importer.error.empty()) throw InputError(error_line(path, importer.error));
   if (is_ply) {
-    if (stream_failed)
-      throw InputError(error_line(path, "file ends early or holds a value that is not a number (truncated?)"));
-    if (static_cast<long long>(s.positions.size()) != declared.vertices ||
-        static_cast<long long>(importer.polygons) != declared.faces)
-      throw InputError(error_line(path, "header declares " + std::to_string(declared.vertices) + " vertices and " +
-                                            std::to_string(declared.faces) + " faces but OpenMesh read " +
+    if (static_cast<long long>(s.positions.size()) != declared_vertices ||
+        static_cast<long long>(importer.polygons) != declared_faces)
+      throw InputError(error_line(path, "header declares " + std::to_string(declared_vertices) + " vertices and " +
+                                            std::to_string(declared_faces) + " faces but OpenMesh read " +
                                             std::to_string(s.positions.size()) + " and " +
                                             std::to_string(importer.polygons)));
   }

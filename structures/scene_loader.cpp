@@ -102,9 +102,11 @@ std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
   std::error_code ec;
   if (!fs::is_regular_file(json_path, ec)) return {};
   const std::string jp = json_path.string();
+  const std::string file_name = fs::path(scene_path).filename().string();
+  const std::string purpose = " (read for the camera views of '" + file_name + "')";
   std::string text = detail::read_file_bytes(jp);
   nlohmann::json root = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (root.is_discarded()) throw InputError(detail::error_line(jp, "is not valid JSON"));
+  if (root.is_discarded()) throw InputError(detail::error_line(jp, "is not valid JSON" + purpose));
 
   // The shared file maps scene names to entries; a plain list of entries is accepted as well.
   std::vector<const nlohmann::json*> entries;
@@ -113,9 +115,8 @@ std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
   else if (root.is_array())
     for (const auto& value : root) entries.push_back(&value);
   else
-    throw InputError(detail::error_line(jp, "must hold an object or a list of scene entries"));
+    throw InputError(detail::error_line(jp, "must hold an object or a list of scene entries" + purpose));
 
-  const std::string file_name = fs::path(scene_path).filename().string();
   for (const nlohmann::json* e : entries) {
     if (!e->is_object()) continue;
     auto file = e->find("file");
@@ -165,7 +166,7 @@ Scene load_scene_file(const std::string& path) {
   else if (ext == ".stl")
     s = load_stl(path);
   else if (ext == ".ply")
-    s = load_mesh_openmesh(path);
+    s = load_ply(path);
   else
     throw InputError(detail::error_line(
         path, (ext.empty() ? std::string("file has no extension") : "unknown scene file extension '" + ext + "'") +

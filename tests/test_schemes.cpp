@@ -7,6 +7,7 @@ namespace tb {
 namespace {
 
 class SchemeAccuracy : public ::testing::TestWithParam<std::string> {};
+class SchemeRobustness : public ::testing::TestWithParam<std::string> {};
 
 // One bench per scene for the whole suite: workloads and reference hits are generated once.
 Bench& bench_for(const std::string& scene) {
@@ -32,7 +33,10 @@ TEST_P(SchemeAccuracy, MatchesReferenceOnOrdinaryWorkloads) {
   }
 }
 
-TEST_P(SchemeAccuracy, NoLeaksOnMustHitHardCases) {
+// Our schemes with their default kernels: not one leak on the must-hit workloads, also with the
+// geometry translated to ~1e5 and ~1e6. (Embree is a baseline: its leak rate is reported by
+// `travbench table accuracy`; Embree 3.13 in robust mode still leaks at exact vertex hits.)
+TEST_P(SchemeRobustness, NoLeaksOnMustHitHardCases) {
   for (const std::string scene : {"sphere", "room", "sphere@148376,1234,-223423", "sphere@1483760,12340,-2234230",
                                    "room@-250000,100000,730000"}) {
     Bench& bench = bench_for(scene);
@@ -41,9 +45,12 @@ TEST_P(SchemeAccuracy, NoLeaksOnMustHitHardCases) {
       const Accuracy a = test::accuracy_of(bench, GetParam(), spec);
       if (hard_case_must_hit(w)) {
         EXPECT_EQ(a.false_miss, 0u) << GetParam() << " leaks on " << scene << " / " << w;
+        // Without an offset every ray starts strictly inside a closed mesh; with one, float
+        // quantisation can put origins on surfaces, so there only the comparison counts.
         const auto& ref = bench.reference_hits(spec);
-        EXPECT_TRUE(std::all_of(ref.begin(), ref.end(), [](const Hit& h) { return h.hit(); }))
-            << "reference misses on must-hit " << scene << " / " << w;
+        if (scene.find('@') == std::string::npos)
+          EXPECT_TRUE(std::all_of(ref.begin(), ref.end(), [](const Hit& h) { return h.hit(); }))
+              << "reference misses on must-hit " << scene << " / " << w;
       } else if (w == "hard:tmin_tmax") {
         EXPECT_EQ(a.false_hit, 0u) << GetParam() << " reports a hit in an empty interval";
       }
@@ -52,6 +59,8 @@ TEST_P(SchemeAccuracy, NoLeaksOnMustHitHardCases) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Registry, SchemeAccuracy, ::testing::ValuesIn(test::schemes_under_test()),
+                         [](const auto& info) { return info.param; });
+INSTANTIATE_TEST_SUITE_P(Registry, SchemeRobustness, ::testing::ValuesIn(test::schemes_under_test(true)),
                          [](const auto& info) { return info.param; });
 
 }  // namespace

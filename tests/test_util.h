@@ -32,11 +32,11 @@ inline Accuracy accuracy_of(Bench& bench, const std::string& scheme, const Workl
   return compare_hits(hits, bench.reference_hits(spec));
 }
 
-// Every registered scheme but the reference itself.
-inline std::vector<std::string> schemes_under_test() {
+// Every registered scheme but the reference itself (baselines too, unless `ours_only`).
+inline std::vector<std::string> schemes_under_test(bool ours_only = false) {
   std::vector<std::string> names;
   for (const auto& s : schemes())
-    if (s.name != "reference") names.push_back(s.name);
+    if (s.name != "reference" && !(ours_only && s.baseline)) names.push_back(s.name);
   return names;
 }
 

@@ -32,21 +32,17 @@ inline constexpr float gamma_f(int n) { return (n * kUlp) / (1 - n * kUlp); }
 // Ize 2013: pad the far slab distance by 1 + 2*gamma(3).
 inline constexpr float kFarPad = 1.f + 2.f * gamma_f(3);
 
-// Reciprocal of a direction component that never produces inf*0 = NaN in the slab test: a zero
-// (or denormal, flushed by DAZ) component becomes +-1e30 with the sign of the zero, so a ray
-// lying exactly in a slab plane still gets a finite, correctly ordered interval.
-inline float safe_rcp(float d) {
-  return std::fabs(d) < 1e-30f ? std::copysign(1e30f, d) : 1.f / d;
-}
-
 // Per-ray data the kernels precompute once.
 struct RayCtx {
   Vec3 org, dir, inv;
+  int near_x, near_y, near_z;  // 1 where the direction's sign bit is set: enter through hi
   // Watertight shear (Woop et al. 2013, §3): permute so z is the dominant direction axis.
   int kx, ky, kz;
   float sx, sy, sz;
   explicit RayCtx(const Ray& r) : org(r.org), dir(r.dir) {
-    inv = {safe_rcp(r.dir.x), safe_rcp(r.dir.y), safe_rcp(r.dir.z)};
+    // 1/(+-0) = +-inf (also for denormals under DAZ): the slab test below is NaN-aware.
+    inv = {1.f / r.dir.x, 1.f / r.dir.y, 1.f / r.dir.z};
+    near_x = std::signbit(inv.x), near_y = std::signbit(inv.y), near_z = std::signbit(inv.z);
     Vec3 a{std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)};
     kz = a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);
     kx = kz == 2 ? 0 : kz + 1;
@@ -58,15 +54,21 @@ struct RayCtx {
   }
 };
 
-// Conservative slab test; returns the entry distance or +inf on a miss. tfar is the current
-// closest hit (or ray tmax). Robust for +-0 direction components, NaN-free.
+// Conservative slab test (Williams et al. 2005 sign-selected slabs, Ize 2013 padding); returns
+// the entry distance or +inf on a miss. tfar is the current closest hit (or ray tmax).
+// A zero direction component gives inv = +-inf, and (plane - org) * inf is NaN exactly when the
+// origin lies on that slab plane, where the ray runs inside the closed slab for every t. The
+// max/min below keep their first argument when the second is NaN (std::max(a, b) is
+// a < b ? b : a), so such a slab constrains nothing — the right answer, with no branch.
 inline float box_entry(const RayCtx& r, const Vec3& lo, const Vec3& hi, float tmin, float tfar) {
-  float tx0 = (lo.x - r.org.x) * r.inv.x, tx1 = (hi.x - r.org.x) * r.inv.x;
-  float ty0 = (lo.y - r.org.y) * r.inv.y, ty1 = (hi.y - r.org.y) * r.inv.y;
-  float tz0 = (lo.z - r.org.z) * r.inv.z, tz1 = (hi.z - r.org.z) * r.inv.z;
-  float tn = std::max(std::max(std::min(tx0, tx1), std::min(ty0, ty1)), std::max(std::min(tz0, tz1), tmin));
-  float tf = std::min(std::min(std::max(tx0, tx1), std::max(ty0, ty1)), std::max(tz0, tz1)) * kFarPad;
-  tf = std::min(tf, tfar);
+  const float nx = ((r.near_x ? hi.x : lo.x) - r.org.x) * r.inv.x;
+  const float fx = ((r.near_x ? lo.x : hi.x) - r.org.x) * r.inv.x;
+  const float ny = ((r.near_y ? hi.y : lo.y) - r.org.y) * r.inv.y;
+  const float fy = ((r.near_y ? lo.y : hi.y) - r.org.y) * r.inv.y;
+  const float nz = ((r.near_z ? hi.z : lo.z) - r.org.z) * r.inv.z;
+  const float fz = ((r.near_z ? lo.z : hi.z) - r.org.z) * r.inv.z;
+  const float tn = std::max(std::max(std::max(tmin, nx), ny), nz);
+  const float tf = std::min(std::min(std::min(tfar, fx * kFarPad), fy * kFarPad), fz * kFarPad);
   return tn <= tf ? tn : INFINITY;
 }
 
@@ -117,10 +119,20 @@ inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmi
   if ((U < 0.f || V < 0.f || W < 0.f) && (U > 0.f || V > 0.f || W > 0.f)) return false;
   const float det = U + V + W;
   if (det == 0.f) return false;  // degenerate or edge-on: never a hit
-  const float Az = r.sz * A[r.kz], Bz = r.sz * B[r.kz], Cz = r.sz * C[r.kz];
-  const float T = U * Az + V * Bz + W * Cz;
+  // The distance from the sheared T/det loses up to ~1e-3 relative on long, thin triangles
+  // (the edge functions cancel); the inside/outside decision above is what must be watertight.
+  // So take t from the triangle's plane, in coordinates relative to the ray origin, which is
+  // accurate to a few ulps unless the ray is nearly parallel to the plane.
   const float inv_det = 1.f / det;
-  const float t = T * inv_det;
+  const Vec3 n = cross(B - A, C - A);
+  const float dn = dot(n, r.dir);
+  float t;
+  if (std::fabs(dn) > 1e-6f * length(n) * length(r.dir)) [[likely]] {
+    t = dot(n, A) / dn;
+  } else {
+    const float T = r.sz * (U * A[r.kz] + V * B[r.kz] + W * C[r.kz]);
+    t = T * inv_det;
+  }
   if (!(t >= tmin && t < hit.t)) return false;
   hit.t = t;
   hit.u = V * inv_det;

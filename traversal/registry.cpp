@@ -4,13 +4,13 @@
 
 namespace tb {
 
-#define TB_SCHEME(name, desc, kernels) std::unique_ptr<Traverser> make_##name(const SchemeConfig&);
+#define TB_SCHEME(name, desc, kernels, baseline) std::unique_ptr<Traverser> make_##name(const SchemeConfig&);
 #include "traversal/schemes.def"
 #undef TB_SCHEME
 
 const std::vector<SchemeInfo>& schemes() {
   static const std::vector<SchemeInfo> list = {
-#define TB_SCHEME(name, desc, kernels) {#name, desc, kernels, make_##name},
+#define TB_SCHEME(name, desc, kernels, baseline) {#name, desc, kernels, baseline, make_##name},
 #include "traversal/schemes.def"
 #undef TB_SCHEME
   };

@@ -12,7 +12,8 @@ namespace tb {
 struct SchemeInfo {
   std::string name;
   std::string description;
-  bool kernels = true;  // honours --kernel (Embree has its own kernels)
+  bool kernels = true;    // honours --kernel (Embree has its own kernels)
+  bool baseline = false;  // an outside library: measured, not held to the accuracy bar
   std::function<std::unique_ptr<Traverser>(const SchemeConfig&)> make;
 };
 

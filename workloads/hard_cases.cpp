@@ -63,12 +63,19 @@ RayBatch hard_case_rays(const Scene& scene, const WorkloadSpec& spec) {
   } else if (k == "hard:axis") {
     // Axis-parallel rays through stored vertices and edge midpoints: the origin shares two
     // coordinates with the target, so two direction components are exactly +0 or -0.
+    // Targets on the scene's bounding box would put the origin on an outer wall, and targets
+    // level with the interior point leave no room to start inside: both are skipped.
+    const AABB box = scene.bounds();
+    const Vec3 ext = box.extent();
     auto axis_rays = [&](Vec3 target, size_t salt) {
       for (int a = 0; a < 3; ++a) {
         Vec3 o = target;
         o[a] = c[a];
         const float s = target[a] - c[a];
-        if (s == 0.f) continue;
+        const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
+        if (std::fabs(s) < 1e-3f * ext[a] || o[b1] == box.lo[b1] || o[b1] == box.hi[b1] || o[b2] == box.lo[b2] ||
+            o[b2] == box.hi[b2])
+          continue;
         Vec3 d{0, 0, 0};
         d[a] = s > 0 ? 1.f : -1.f;
         // Alternate +0 and -0 in the zero components.
