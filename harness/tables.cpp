@@ -10,21 +10,34 @@
 #include "workloads/hard_cases.h"
 
 namespace tb {
-namespace {
 
-std::vector<std::string> default_schemes(const TableOptions& opt) {
+#define TB_TABLE(name, fn) int fn(const TableOptions&);
+#include "harness/tables.def"
+#undef TB_TABLE
+
+std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback) {
   if (!opt.run.schemes.empty()) return opt.run.schemes;
+  if (!fallback.empty()) {
+    std::vector<std::string> known;  // keep only registered schemes, in the given order
+    for (const auto& f : fallback)
+      for (const auto& s : schemes())
+        if (s.name == f) known.push_back(f);
+    return known;
+  }
   std::vector<std::string> all;
   for (const auto& s : schemes())
     if (s.name != "reference") all.push_back(s.name);
   return all;
 }
 
-// A scheme variant of the accuracy table: a kernel for our schemes, robust or fast mode for Embree.
-struct Variant {
-  std::string label;
-  SchemeConfig config;
-};
+WorkloadSpec table_spec(const TableOptions& opt, const std::string& workload, uint32_t view) {
+  WorkloadSpec spec = parse_workload(workload);
+  spec.width = opt.run.width;
+  spec.height = opt.run.height;
+  spec.seed = opt.run.seed;
+  spec.view = view;
+  return spec;
+}
 
 std::vector<Variant> variants_of(const SchemeInfo& info, const SchemeConfig& base) {
   std::vector<Variant> v;
@@ -81,9 +94,13 @@ int accuracy_table(const TableOptions& opt) {
   return 0;
 }
 
+namespace {
+
 const std::map<std::string, std::function<int(const TableOptions&)>>& registry() {
   static const std::map<std::string, std::function<int(const TableOptions&)>> tables = {
-      {"accuracy", accuracy_table},
+#define TB_TABLE(name, fn) {#name, fn},
+#include "harness/tables.def"
+#undef TB_TABLE
   };
   return tables;
 }
