@@ -1,0 +1,244 @@
+#!/usr/bin/python3
+"""Plots every travbench CSV in a results folder: one PNG per table.
+
+Usage: /usr/bin/python3 scripts/plot.py results/<scene> [more folders...]
+Run with Debian's /usr/bin/python3 (python3-matplotlib). Scheme colours are the same in every
+plot; the thesis' values are drawn as hollow markers.
+"""
+import csv
+import math
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+SCHEME_ORDER = [
+    "bvh_single", "mbvh4_single", "mbvh8_single", "kd_single", "kd_packet", "bvh_masked", "bvh_ranged",
+    "bvh_partition", "mbvh_rs", "raygrid", "embree_single", "embree_packet8", "embree_stream", "reference",
+]
+_palette = plt.get_cmap("tab20").colors
+
+
+def colour(scheme):
+    base = scheme.split("@")[0]
+    i = SCHEME_ORDER.index(base) if base in SCHEME_ORDER else len(SCHEME_ORDER) + hash(base) % 6
+    return _palette[i % len(_palette)]
+
+
+def read(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def num(row, key):
+    try:
+        return float(row.get(key, "") or "nan")
+    except ValueError:
+        return math.nan
+
+
+def ordered(names):
+    return sorted(set(names), key=lambda s: (SCHEME_ORDER.index(s) if s in SCHEME_ORDER else 99, s))
+
+
+def grouped_bars(ax, rows, group_key, groups, schemes, value_key, thesis_key=None):
+    width = 0.8 / max(1, len(schemes))
+    for j, s in enumerate(schemes):
+        xs, ys, ts = [], [], []
+        for i, g in enumerate(groups):
+            match = [r for r in rows if r[group_key] == g and r["scheme"] == s]
+            if not match:
+                continue
+            xs.append(i + (j - (len(schemes) - 1) / 2) * width)
+            ys.append(num(match[0], value_key))
+            ts.append(num(match[0], thesis_key) if thesis_key else math.nan)
+        ax.bar(xs, ys, width, label=s, color=colour(s))
+        pts = [(x, t) for x, t in zip(xs, ts) if not math.isnan(t)]
+        if pts:
+            ax.scatter([p[0] for p in pts], [p[1] for p in pts], facecolors="none", edgecolors="black",
+                       zorder=3, s=28, label=None)
+    ax.set_xticks(range(len(groups)))
+    ax.set_xticklabels(groups, rotation=20)
+
+
+def finish(fig, ax, out, title, ylabel, thesis=False):
+    ax.set_title(title)
+    ax.set_ylabel(ylabel)
+    handles, labels = ax.get_legend_handles_labels()
+    if thesis:
+        handles.append(plt.Line2D([], [], marker="o", markerfacecolor="none", markeredgecolor="black",
+                                  linestyle=""))
+        labels.append("thesis (Bikker 2012)")
+    ax.legend(handles, labels, fontsize=7, ncol=2)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    print(f"wrote {out}")
+
+
+def plot_run(path):
+    rows = read(path)
+    workloads = list(dict.fromkeys(r["workload"] for r in rows))
+    schemes = ordered(r["scheme"] for r in rows if r["scheme"] != "reference")
+    fig, ax = plt.subplots(figsize=(10, 4.8))
+    grouped_bars(ax, rows, "workload", workloads, schemes, "mrays_median")
+    scene = rows[0]["scene"] if rows else ""
+    finish(fig, ax, path.with_suffix(".png"), f"{scene}: throughput per workload (1 thread, median)", "Mrays/s")
+
+
+def plot_accuracy(path):
+    rows = read(path)
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    markers = {"watertight": "o", "moller": "s", "plane": "^", "plane_rcp": "v", "embree_robust": "D",
+               "embree_default": "P"}
+    for (s, k) in sorted({(r["scheme"], r["kernel"]) for r in rows}):
+        pts = [r for r in rows if r["scheme"] == s and r["kernel"] == k]
+        xs = [num(r, "mrays_median") for r in pts]
+        # zero error is drawn at the axis floor so it stays visible on the log scale
+        ys = [max(num(r, "mismatch_rate"), 1e-7) for r in pts]
+        ax.scatter(xs, ys, color=colour(s), marker=markers.get(k, "x"), s=22, alpha=0.75, label=f"{s} / {k}")
+    ax.set_yscale("log")
+    ax.set_xlabel("Mrays/s (median, 1 thread)")
+    ax.axhline(1e-5, color="red", lw=0.8, ls="--")
+    ax.text(ax.get_xlim()[1], 1.1e-5, " accuracy bar 1e-5", color="red", fontsize=7, ha="right")
+    finish(fig, ax, path.with_suffix(".png"), "speed vs error, every scheme x kernel, all workloads (floor = 0)",
+           "mismatch rate vs reference")
+
+
+def plot_divergence(path):
+    rows = read(path)
+    views = sorted({r["view"] for r in rows})
+    fig, axes = plt.subplots(2, len(views), figsize=(5 * len(views), 7.5), squeeze=False)
+    for c, v in enumerate(views):
+        vr = [r for r in rows if r["view"] == v]
+        workloads = list(dict.fromkeys(r["workload"] for r in vr))
+        for s in ordered(r["scheme"] for r in vr):
+            sr = {r["workload"]: r for r in vr if r["scheme"] == s}
+            xs = [i for i, w in enumerate(workloads) if w in sr]
+            axes[0][c].plot(xs, [num(sr[workloads[i]], "mrays_median") for i in xs], "-o", ms=3, color=colour(s),
+                            label=s)
+            axes[1][c].plot(xs, [num(sr[workloads[i]], "pct_of_d1") for i in xs], "-o", ms=3, color=colour(s))
+            th = [(i, num(sr[workloads[i]], "thesis_mrays")) for i in xs]
+            th = [p for p in th if not math.isnan(p[1])]
+            if th:
+                axes[0][c].scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
+        for ax in axes[:, c]:
+            ax.set_xticks(range(len(workloads)))
+            ax.set_xticklabels([w.replace("divergence:", "D=") for w in workloads], rotation=30, fontsize=8)
+            ax.grid(alpha=0.3)
+        axes[0][c].set_title(f"view {v}")
+        axes[0][c].set_ylabel("Mrays/s")
+        axes[1][c].set_ylabel("% of D=1")
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle("divergence (thesis §3.4, Tables 2-4; hollow = thesis, ranged packets)")
+    fig.tight_layout()
+    fig.savefig(path.with_suffix(".png"), dpi=110)
+    plt.close(fig)
+    print(f"wrote {path.with_suffix('.png')}")
+
+
+def plot_by_workload_with_thesis(path, title):
+    rows = read(path)
+    workloads = list(dict.fromkeys(r["workload"] for r in rows))
+    schemes = ordered(r["scheme"] for r in rows)
+    fig, ax = plt.subplots(figsize=(10, 4.8))
+    grouped_bars(ax, rows, "workload", workloads, schemes, "mrays_median", "thesis_mrays")
+    finish(fig, ax, path.with_suffix(".png"), title, "Mrays/s", thesis=True)
+    if rows and "rays_per_node" in rows[0]:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+        for ax, key in zip(axes, ["rays_per_node", "rays_per_leaf"]):
+            grouped_bars(ax, rows, "workload", workloads, schemes, key, "thesis_" + key)
+            ax.set_yscale("log")
+            ax.set_ylabel(key.replace("_", " "))
+            ax.grid(axis="y", alpha=0.3)
+        axes[0].legend(fontsize=7)
+        fig.suptitle("average rays per visited node (thesis Tables 8/10; hollow = thesis)")
+        fig.tight_layout()
+        out = path.with_name(path.stem + "_rays_per_node.png")
+        fig.savefig(out, dpi=110)
+        plt.close(fig)
+        print(f"wrote {out}")
+
+
+def plot_cache(path):
+    rows = read(path)
+    labels = [r.get("label") or r["scheme"] for r in rows]
+    levels = [("l1", "L1"), ("l2", "L2"), ("l3", "L3"), ("mem", "memory")]
+    lat = {"l1": 4, "l2": 11, "l3": 39, "mem": 107}
+    fig, ax = plt.subplots(figsize=(max(7, len(rows) * 0.8), 4.8))
+    bottom = [0.0] * len(rows)
+    for (key, name), shade in zip(levels, ["#9ecae1", "#4292c6", "#08519c", "#08306b"]):
+        col = f"{key}_read_hit_m" if key != "mem" else "mem_read_m"
+        vals = [num(r, col) * lat[key] / 1e3 for r in rows]  # 1e6 hits x cycles -> 1e9 cycles
+        vals = [0 if math.isnan(v) else v for v in vals]
+        ax.bar(range(len(rows)), vals, bottom=bottom, color=shade, label=name)
+        bottom = [b + v for b, v in zip(bottom, vals)]
+    th = [(i, num(r, "thesis_read_cost_gcycles")) for i, r in enumerate(rows)]
+    th = [p for p in th if not math.isnan(p[1])]
+    if th:
+        ax2 = ax.twinx()
+        ax2.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
+        ax2.set_ylabel("thesis estimate (1e9 cycles, Conference 512x512)")
+    ax.set_xticks(range(len(rows)))
+    ax.set_xticklabels(labels, rotation=30, fontsize=8)
+    finish(fig, ax, path.with_suffix(".png"), "estimated read cost per level (thesis §5.4, Table 11)",
+           "1e9 cycles (hits x latency)", thesis=bool(th))
+
+
+def plot_scaling(path):
+    rows = read(path)
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for s in ordered(r["scheme"] for r in rows):
+        sr = sorted((r for r in rows if r["scheme"] == s), key=lambda r: num(r, "triangles"))
+        ax.plot([num(r, "triangles") for r in sr], [num(r, "mrays_median") for r in sr], "-o", ms=3,
+                color=colour(s), label=s)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("triangles")
+    finish(fig, ax, path.with_suffix(".png"), "scaling: bounce:2 on spheres:N", "Mrays/s")
+
+
+def plot_build(path):
+    rows = read(path)
+    labels = [f'{r["structure"]} {r.get("triangles", "")}' for r in rows]
+    fig, ax = plt.subplots(figsize=(max(7, len(rows) * 0.5), 4.8))
+    ax.bar(range(len(rows)), [num(r, "build_ms") for r in rows], color="#4292c6", label="travbench / Embree")
+    th = [(i, num(r, "thesis_ms")) for i, r in enumerate(rows)]
+    th = [p for p in th if not math.isnan(p[1])]
+    if th:
+        ax.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
+    ax.set_yscale("log")
+    ax.set_xticks(range(len(rows)))
+    ax.set_xticklabels(labels, rotation=60, fontsize=7)
+    finish(fig, ax, path.with_suffix(".png"), "build and refit times (thesis Table 1)", "ms (log)", thesis=bool(th))
+
+
+PLOTTERS = {
+    "run": plot_run,
+    "accuracy": plot_accuracy,
+    "divergence": plot_divergence,
+    "bounce": lambda p: plot_by_workload_with_thesis(p, "bounce depth (thesis §5.2.3, Table 7)"),
+    "raygrid": lambda p: plot_by_workload_with_thesis(p, "RayGrid vs MBVH (thesis §5.3, Table 9)"),
+    "cache": plot_cache,
+    "scaling": plot_scaling,
+    "build": plot_build,
+}
+
+
+def main(folders):
+    for folder in folders:
+        for path in sorted(Path(folder).glob("*.csv")):
+            kind = path.stem.split("_")[0]
+            if kind in PLOTTERS:
+                try:
+                    PLOTTERS[kind](path)
+                except (KeyError, ValueError, IndexError) as e:
+                    print(f"could not plot {path}: {e}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:] or ["results"])
