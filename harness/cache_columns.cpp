@@ -28,8 +28,8 @@ void add_cache_columns(Record& r, const Traverser& scheme, const RayBatch& batch
   }
   r.set("mem_read_m", double(h.memory_reads()) * 1e-6)
       .set("mem_write_m", double(h.memory_writes()) * 1e-6)
-      .set("cost_gcycles", double(h.cost_cycles()) * 1e-9)
-      .set("read_cost_gcycles", double(h.read_cost_cycles()) * 1e-9);
+      .set("cost_mcycles", double(h.cost_cycles()) * 1e-6)
+      .set("read_cost_mcycles", double(h.read_cost_cycles()) * 1e-6);
   const double total = double(h.read_cost_cycles());
   for (size_t i = 0; i < h.num_levels() && total > 0; ++i) {
     r.set(level_key(i) + "_pct", 100.0 * double(h.counters(i).read_hits * h.level_config(i).latency_cycles) / total);

@@ -173,20 +173,20 @@ def plot_cache(path):
     bottom = [0.0] * len(rows)
     for (key, name), shade in zip(levels, ["#9ecae1", "#4292c6", "#08519c", "#08306b"]):
         col = f"{key}_read_hit_m" if key != "mem" else "mem_read_m"
-        vals = [num(r, col) * lat[key] / 1e3 for r in rows]  # 1e6 hits x cycles -> 1e9 cycles
+        vals = [num(r, col) * lat[key] for r in rows]  # 1e6 hits x cycles = 1e6 cycles
         vals = [0 if math.isnan(v) else v for v in vals]
         ax.bar(range(len(rows)), vals, bottom=bottom, color=shade, label=name)
         bottom = [b + v for b, v in zip(bottom, vals)]
-    th = [(i, num(r, "thesis_read_cost_gcycles")) for i, r in enumerate(rows)]
+    th = [(i, num(r, "thesis_read_cost_mcycles")) for i, r in enumerate(rows)]
     th = [p for p in th if not math.isnan(p[1])]
     if th:
         ax2 = ax.twinx()
         ax2.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
-        ax2.set_ylabel("thesis estimate (1e9 cycles, Conference 512x512)")
+        ax2.set_ylabel("thesis estimate (1e6 cycles, Conference 512x512)")
     ax.set_xticks(range(len(rows)))
     ax.set_xticklabels(labels, rotation=30, fontsize=8)
     finish(fig, ax, path.with_suffix(".png"), "estimated read cost per level (thesis §5.4, Table 11)",
-           "1e9 cycles (hits x latency)", thesis=bool(th))
+           "1e6 cycles (read hits x latency)", thesis=bool(th))
 
 
 def plot_scaling(path):

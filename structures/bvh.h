@@ -25,6 +25,7 @@ struct BVHBuildParams {
   int max_leaf = 4;       // leaves never hold more prims than this
   float cost_traversal = 1.f;
   float cost_intersect = 1.f;
+  int threads = 1;        // build threads (the tree is the same; node order may differ)
   std::string key() const;  // for the structure cache
 };
 
@@ -42,7 +43,7 @@ struct BVH {
 
   static BVH build(const Scene& scene, const BVHBuildParams& params = {});
   // Recomputes every box bottom-up for moved vertices, keeping the topology (thesis Table 1).
-  void refit(const Scene& scene);
+  void refit(const Scene& scene, int threads = 1);
   double compute_sah_cost(const BVHBuildParams& params) const;
 };
 

@@ -100,3 +100,24 @@ TEST(BVH, RefitTracksMovedGeometry) {
 
 }  // namespace
 }  // namespace tb
+
+namespace tb {
+namespace {
+
+TEST(BVH, ParallelBuildAndRefitMatchSerial) {
+  Scene s = make_builtin_scene("spheres:60000");
+  BVHBuildParams p;
+  BVH serial = BVH::build(s, p);
+  p.threads = 2;
+  BVH parallel = BVH::build(s, p);
+  check_invariants(s, parallel, 4);
+  EXPECT_EQ(parallel.stats.nodes, serial.stats.nodes);
+  EXPECT_EQ(parallel.stats.leaves, serial.stats.leaves);
+  EXPECT_NEAR(parallel.stats.sah_cost, serial.stats.sah_cost, 1e-6 * serial.stats.sah_cost);
+  for (auto& v : s.positions) v = v * 0.5f;
+  parallel.refit(s, 2);
+  check_invariants(s, parallel, 4);
+}
+
+}  // namespace
+}  // namespace tb

@@ -882,7 +882,7 @@ json shared_scenes_json() {
 
 bool shared_scenes_present() { return kSharedScenes[0] && fs::exists(fs::path(kSharedScenes) / "scenes.json"); }
 
-TEST(RealScenes, CountsBoundsAndViewsMatchScenesJson) {
+TEST(LoaderRealScenes, CountsBoundsAndViewsMatchScenesJson) {
   if (!shared_scenes_present()) GTEST_SKIP() << "shared scenes folder not present";
   const json scenes = shared_scenes_json();
   for (const auto& [key, entry] : scenes.items()) {
@@ -914,7 +914,7 @@ TEST(RealScenes, CountsBoundsAndViewsMatchScenesJson) {
 
 // The OBJ parser against OpenMesh's OBJ reader on every real scene: same triangles, same corner
 // positions, same order (these files have no degenerate faces, which OpenMesh would drop).
-TEST(RealScenes, ObjParserMatchesOpenMesh) {
+TEST(LoaderRealScenes, ObjParserMatchesOpenMesh) {
   if (!shared_scenes_present()) GTEST_SKIP() << "shared scenes folder not present";
   const json scenes = shared_scenes_json();
   for (const auto& [key, entry] : scenes.items()) {

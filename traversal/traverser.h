@@ -36,6 +36,8 @@ class Traverser {
   virtual void trace(const RayBatch& batch, PacketRange range, std::span<Hit> hits, Probe& probe) const = 0;
   // One line describing the built structure (nodes, bytes, ...), for logs and the build table.
   virtual std::string structure_info() const { return {}; }
+  // Bytes of the scheme's acceleration structure and triangle data (0 when not known, e.g. Embree).
+  virtual size_t structure_bytes() const { return 0; }
 };
 
 // Implements both trace entry points with one template: Derived provides

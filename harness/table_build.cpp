@@ -1,0 +1,91 @@
+// `travbench table build`: thesis Table 1 (BVH rebuild and refit for 1 and N threads at ~44k, 88k
+// and 388k triangles) plus the build time and memory of every scheme's structure and of Embree's
+// three build qualities, on the same scene.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <thread>
+
+#include "harness/tables.h"
+#include "harness/thesis_reference.h"
+#include "structures/builtin_scenes.h"
+#include "structures/bvh.h"
+#include "traversal/embree_common.h"
+#include "traversal/registry.h"
+
+namespace tb {
+namespace {
+
+template <class F>
+double median_ms(int reps, F&& f) {
+  std::vector<double> ms;
+  for (int r = 0; r < std::max(1, reps); ++r) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms[ms.size() / 2];
+}
+
+}  // namespace
+
+int build_table(const TableOptions& opt) {
+  const ThesisTable thesis = load_thesis_table("table01_build_refit.csv");
+  const int nthreads = std::max(2, int(std::thread::hardware_concurrency()));
+  const int reps = std::max(1, std::min(opt.run.reps, 5));
+  std::vector<Record> records;
+  // Table 1: the thesis rebuilt a group of 4 objects; spheres:N gives the same triangle counts.
+  for (const char* tris : {"44000", "88000", "388000"}) {
+    Scene s = make_builtin_scene(std::string("spheres:") + tris);
+    for (int threads : {1, nthreads}) {
+      BVHBuildParams p;
+      p.threads = threads;
+      BVH bvh;
+      const double build = median_ms(reps, [&] { bvh = BVH::build(s, p); });
+      const double refit = median_ms(reps, [&] { bvh.refit(s, threads); });
+      const std::string tcol = threads == 1 ? "1t" : "4t";  // the thesis measured 1 and 4 threads
+      Record r;
+      r.set("structure", "bvh (binned SAH)").set("scene", s.name).set("triangles", uint64_t(s.num_triangles()));
+      r.set("threads", threads).set("build_ms", build).set("refit_ms", refit).set("bytes", uint64_t(bvh.stats.bytes));
+      if (auto v = thesis.lookup({"triangles"}, {tris}, "rebuild_" + tcol + "_ms")) r.set("thesis_ms", *v);
+      if (auto v = thesis.lookup({"triangles"}, {tris}, "refit_" + tcol + "_ms")) r.set("thesis_refit_ms", *v);
+      if (auto v = thesis.lookup({"triangles"}, {tris}, "rebuild_" + tcol + "_ms")) r.set("thesis_threads", tcol);
+      std::fprintf(stderr, "bvh %s tris, %d thread(s): build %.1f ms, refit %.1f ms\n", tris, threads, build, refit);
+      records.push_back(std::move(r));
+    }
+  }
+  // Every scheme's structure (prepare() on a fresh cache) and Embree's build qualities.
+  const Scene scene = load_scene(opt.scene.empty() ? "room" : opt.scene);
+  for (const auto& name : default_schemes(opt)) {
+    if (find_scheme(name).baseline) continue;
+    std::unique_ptr<Traverser> t;
+    const double ms = median_ms(reps, [&] {
+      StructureCache cache(scene);
+      t = make_scheme(name, opt.run.scheme_config);
+      t->prepare(scene, cache);
+    });
+    Record r;
+    r.set("structure", name).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
+    r.set("threads", 1).set("build_ms", ms).set("bytes", uint64_t(t->structure_bytes()));
+    r.set("info", t->structure_info());
+    std::fprintf(stderr, "%-14s %s: %.1f ms  %s\n", name.c_str(), scene.name.c_str(), ms, t->structure_info().c_str());
+    records.push_back(std::move(r));
+  }
+  for (auto q : {EmbreeQuality::low, EmbreeQuality::medium, EmbreeQuality::high}) {
+    const char* qn = q == EmbreeQuality::low ? "embree low" : q == EmbreeQuality::medium ? "embree medium" : "embree high";
+    const double ms = median_ms(reps, [&] { EmbreeScene e(scene, q, true); });
+    Record r;
+    r.set("structure", qn).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
+    r.set("threads", 1).set("build_ms", ms);
+    std::fprintf(stderr, "%-14s %s: %.1f ms\n", qn, scene.name.c_str(), ms);
+    records.push_back(std::move(r));
+  }
+  write_csv(opt.csv, records, {{"command", "table build"}, {"scene", scene.name}});
+  print_table(records, {"structure", "scene", "triangles", "threads", "build_ms", "refit_ms", "thesis_ms",
+                        "thesis_refit_ms", "bytes"},
+              stdout);
+  return 0;
+}
+
+}  // namespace tb

@@ -1,0 +1,67 @@
+// `travbench table cache`: thesis Table 11 (§5.4) — simulated L1/L2/L3 behaviour of RayGrid at
+// ray-queue sizes 64..1024 and of MBVH/RS on bounce:2 of a 512x512 camera, hits per level in
+// millions, the estimated cost and each level's share; then the same columns for every other
+// scheme. The thesis' costs add up read hits x latency only (see cachesim/hierarchy.h), so the
+// comparison column is read_cost_mcycles.
+#include <cstdio>
+
+#include "harness/tables.h"
+#include "harness/thesis_reference.h"
+#include "structures/builtin_scenes.h"
+#include "traversal/registry.h"
+
+namespace tb {
+
+int cache_table(const TableOptions& opt) {
+  const ThesisTable thesis = load_thesis_table("table11_cache_raygrid.csv");
+  Bench bench(load_scene(opt.scene.empty() ? "room" : opt.scene));
+  TableOptions o = opt;
+  o.run.width = o.run.height = 512;  // the thesis' image size for Table 11
+  const WorkloadSpec spec = table_spec(o, "bounce:2");
+  RunOptions run = o.run;
+  run.cache = true;
+  run.reps = std::max(1, std::min(run.reps, 3));
+  struct Cell {
+    std::string scheme, label, thesis_col;
+    SchemeConfig cfg;
+  };
+  std::vector<Cell> cells;
+  const bool has_raygrid = [] {
+    for (const auto& s : schemes())
+      if (s.name == "raygrid") return true;
+    return false;
+  }();
+  if (has_raygrid)
+    for (int m : {64, 128, 256, 512, 1024}) {
+      SchemeConfig c = run.scheme_config;
+      c.params["queue"] = std::to_string(m);
+      cells.push_back({"raygrid", "raygrid M=" + std::to_string(m), "batch" + std::to_string(m), c});
+    }
+  for (const auto& name : default_schemes(opt))
+    if (name != "raygrid") cells.push_back({name, name, name == "mbvh_rs" ? "mbvh_rs" : "", run.scheme_config});
+  const bool conference = bench.scene().name == "conference";
+  std::vector<Record> records;
+  for (const Cell& c : cells) {
+    auto t = make_scheme(c.scheme, c.cfg);
+    t->prepare(bench.scene(), bench.cache());
+    Record r = measure_cell(bench, spec, *t, run);
+    r.set("label", c.label);
+    if (conference && !c.thesis_col.empty()) {  // the thesis measured the Conference Room
+      for (const auto& [ours, theirs] : std::vector<std::pair<std::string, std::string>>{
+               {"l1_read_hit_m", "l1_read_hit"}, {"l2_read_hit_m", "l2_read_hit"}, {"l3_read_hit_m", "l3_read_hit"},
+               {"mem_read_m", "mem_read"}, {"l1_write_hit_m", "l1_write_hit"}, {"read_cost_mcycles", "cost_est_gcycles"},
+               {"l1_pct", "l1_pct"}, {"mem_pct", "mem_pct"}})
+        if (auto v = thesis.lookup({"metric"}, {theirs}, c.thesis_col)) r.set("thesis_" + ours, *v);
+    }
+    std::fprintf(stderr, "%-16s L1 %s M read hits, memory %s M reads, cost %s Mcycles\n", c.label.c_str(),
+                 r.get("l1_read_hit_m")->c_str(), r.get("mem_read_m")->c_str(), r.get("read_cost_mcycles")->c_str());
+    records.push_back(std::move(r));
+  }
+  write_csv(opt.csv, records, {{"command", "table cache"}, {"workload", "bounce:2"}, {"image", "512x512"}});
+  print_table(records, {"label", "l1_read_hit_m", "l2_read_hit_m", "l3_read_hit_m", "mem_read_m", "l1_write_hit_m",
+                        "read_cost_mcycles", "l1_pct", "l2_pct", "l3_pct", "mem_pct", "thesis_read_cost_mcycles"},
+              stdout);
+  return 0;
+}
+
+}  // namespace tb
