@@ -1,8 +1,17 @@
 // travbench command line (DESIGN.md "Command line"): parses and dispatches, nothing more.
+//
+// Every option value is checked while parsing (CLI11 validators), so a bad value fails at once, before
+// any scene is built, with one line that names the option: "travbench: error: --workloads: ...".
+// Problems found later (a scene file that does not load, a ray file that is cut short) are one line
+// too, "travbench: error: <file>: <what>". Exit status: 0 on success, 2 for bad input (CLI11 parse
+// errors keep their own non-zero codes), 1 for anything else; never a signal.
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <filesystem>
+#include <functional>
 #include <iostream>
+#include <new>
 #include <sstream>
 
 #include "cachesim/din_trace.h"
@@ -10,12 +19,21 @@
 #include "harness/tables.h"
 #include "harness/trace_runner.h"
 #include "structures/builtin_scenes.h"
+#include "traversal/kernels.h"
 #include "traversal/registry.h"
 #include "workloads/ray_file.h"
 
 using namespace tb;
 
 namespace {
+
+// The contract is one line per error: fold any line breaks a library put into its message.
+std::string one_line(std::string s) {
+  for (char& c : s)
+    if (c == '\n' || c == '\r') c = ' ';
+  while (!s.empty() && s.back() == ' ') s.pop_back();
+  return s;
+}
 
 void print_list(const std::string& what, bool headed) {
   auto section = [&](const char* title, const std::vector<std::string>& names) {
@@ -43,11 +61,72 @@ void apply_params(SchemeConfig& cfg, const std::vector<std::string>& params, con
   }
 }
 
+// ---- validators: each runs the parser the value is meant for, so the CLI and the library can
+// never disagree about what is valid; CLI11 prefixes the message with the option name.
+
+CLI::Validator checked_by(const std::string& desc, std::function<void(const std::string&)> parse) {
+  return CLI::Validator(
+      [parse](std::string& value) -> std::string {
+        try {
+          parse(value);
+          return {};
+        } catch (const std::exception& e) {
+          return one_line(e.what());
+        }
+      },
+      desc);
+}
+
+void for_each_item(const std::string& list, const std::function<void(const std::string&)>& fn) {
+  std::stringstream ss(list);
+  bool any = false;
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) fn(item), any = true;
+  if (!any) throw InputError("empty list");
+}
+
+const CLI::Validator kWorkloads = checked_by("WORKLOAD[,WORKLOAD...]", [](const std::string& v) {
+  for_each_item(v, [](const std::string& w) { parse_workload(w); });
+});
+const CLI::Validator kWorkload = checked_by("WORKLOAD", [](const std::string& v) { parse_workload(v); });
+const CLI::Validator kSchemes = checked_by("SCHEME[,SCHEME...]|all", [](const std::string& v) { expand_scheme_list(v); });
+const CLI::Validator kScheme = checked_by("SCHEME", [](const std::string& v) { find_scheme(v); });
+const CLI::Validator kKernel = checked_by("KERNEL", [](const std::string& v) { parse_kernel(v); });
+const CLI::Validator kParam = checked_by("KEY=VALUE", [](const std::string& v) {
+  const auto eq = v.find('=');
+  if (eq == std::string::npos || eq == 0) throw InputError("'" + v + "' is not key=value");
+});
+const CLI::Validator kCacheConfig = checked_by("LEVELS", [](const std::string& v) {
+  cachesim::validate_config(cachesim::parse_config(v));
+});
+const CLI::Validator kPolicy = checked_by("POLICY", [](const std::string& v) { cachesim::parse_policy(v); });
+const CLI::Validator kSeed = checked_by("UINT", [](const std::string& v) {
+  if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos)
+    throw InputError("'" + v + "' is not a non-negative integer");
+});
+const CLI::Validator kScene = checked_by("SCENE", [](const std::string& v) {
+  if (v.empty()) throw InputError("empty scene name");
+});
+// An output file: its directory must exist and the path must not be a directory, so that a typo
+// fails before a long run rather than when its results are written.
+const CLI::Validator kOutputFile = checked_by("FILE", [](const std::string& v) {
+  namespace fs = std::filesystem;
+  if (v.empty()) throw InputError("empty file name");
+  std::error_code ec;
+  if (fs::is_directory(v, ec)) throw InputError("'" + v + "' is a directory, not a file");
+  const fs::path parent = fs::path(v).parent_path();
+  if (!parent.empty() && !fs::is_directory(parent, ec))
+    throw InputError("directory '" + parent.string() + "' of '" + v + "' does not exist");
+});
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"travbench: ray-traversal benchmark suite (Bikker 2012 experiments)"};
   app.require_subcommand(1);
+  app.failure_message([](const CLI::App*, const CLI::Error& e) {
+    return "travbench: error: " + one_line(e.what()) + " (see travbench --help)\n";
+  });
 
   std::string list_what;
   auto* list = app.add_subcommand("list", "List schemes, scenes, workloads (one per line) or tables");
@@ -58,30 +137,34 @@ int main(int argc, char** argv) {
   std::string scene_arg, schemes_arg = "all", workloads_arg = "primary", csv_path, kernel = "watertight";
   std::vector<std::string> params;
   auto add_common = [&](CLI::App* c, bool need_schemes) {
-    c->add_option("--scene", scene_arg, "built-in scene name or scene file path")->required();
-    if (need_schemes) c->add_option("--schemes", schemes_arg, "comma-separated scheme names or 'all'");
+    c->add_option("--scene", scene_arg, "built-in scene name or scene file path")->required()->check(kScene);
+    if (need_schemes)
+      c->add_option("--schemes", schemes_arg, "comma-separated scheme names or 'all'")->check(kSchemes);
     c->add_option("--threads", ro.threads, "tracing threads")->check(CLI::Range(1, 256));
     c->add_option("--reps", ro.reps, "timed repetitions (after one warm-up)")->check(CLI::Range(1, 1000));
     c->add_option("--width", ro.width, "image width for camera workloads")->check(CLI::Range(16, 16384));
     c->add_option("--height", ro.height, "image height for camera workloads")->check(CLI::Range(16, 16384));
-    c->add_option("--seed", ro.seed, "workload seed");
-    c->add_option("--kernel", kernel, "triangle kernel: watertight | moller | plane | plane_rcp");
-    c->add_option("--param", params, "scheme parameter key=value (repeatable), e.g. leaf_size=4");
-    c->add_option("--csv", csv_path, "output CSV (a .json provenance sidecar is written beside it)");
+    c->add_option("--seed", ro.seed, "workload seed")->check(kSeed);
+    c->add_option("--kernel", kernel, "triangle kernel: watertight | moller | plane | plane_rcp")->check(kKernel);
+    c->add_option("--param", params, "scheme parameter key=value (repeatable), e.g. leaf_size=4")->check(kParam);
+    c->add_option("--csv", csv_path, "output CSV (a .json provenance sidecar is written beside it)")->check(kOutputFile);
   };
+  // Views: the scene's (scenes.json may list any number; derived views are 3); checked against the
+  // loaded scene below, this range only catches nonsense early.
+  const auto view_range = CLI::Range(1, 64);
   auto* run = app.add_subcommand("run", "Measure schemes x workloads on one scene -> CSV");
   add_common(run, true);
-  run->add_option("--workloads", workloads_arg, "comma-separated workloads, e.g. primary,bounce:2");
-  run->add_option("--view", ro.view, "camera view (1-3)")->check(CLI::Range(1, 3));
+  run->add_option("--workloads", workloads_arg, "comma-separated workloads, e.g. primary,bounce:2")->check(kWorkloads);
+  run->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
   run->add_flag("--stats", ro.stats, "add node/leaf/triangle counts per ray and rays per visited node");
   run->add_flag("--cache", ro.cache, "add simulated L1/L2/L3 hits, memory accesses and estimated cycles");
-  run->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16");
-  run->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru");
+  run->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
+  run->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru")->check(kPolicy);
   run->get_option("--csv")->required();
 
   std::string table_name;
   auto* table = app.add_subcommand("table", "Reproduce a thesis table -> CSV + terminal table");
-  table->add_option("name", table_name, "table name (travbench list tables)")->required();
+  table->add_option("name", table_name, "table name (travbench list tables)")->required()->check(CLI::IsMember(table_names()));
   add_common(table, true);
   table->get_option("--scene")->required(false);
   table->get_option("--csv")->required();
@@ -89,22 +172,22 @@ int main(int argc, char** argv) {
   std::string rays_out, workload_arg;
   auto* rays = app.add_subcommand("rays", "Generate a workload and write it as a ray file");
   add_common(rays, false);
-  rays->add_option("--workload", workload_arg, "workload name")->required();
-  rays->add_option("--view", ro.view, "camera view (1-3)")->check(CLI::Range(1, 3));
-  rays->add_option("--out", rays_out, "ray file to write")->required();
+  rays->add_option("--workload", workload_arg, "workload name")->required()->check(kWorkload);
+  rays->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
+  rays->add_option("--out", rays_out, "ray file to write")->required()->check(kOutputFile);
 
   std::string scheme_arg, rays_in, hits_out;
   auto* trace = app.add_subcommand("trace", "Trace a ray file with one scheme and write a hit file");
   add_common(trace, false);
-  trace->add_option("--scheme", scheme_arg, "scheme name")->required();
+  trace->add_option("--scheme", scheme_arg, "scheme name")->required()->check(kScheme);
   trace->add_option("--rays", rays_in, "ray file to read")->required();
-  trace->add_option("--hits", hits_out, "hit file to write")->required();
+  trace->add_option("--hits", hits_out, "hit file to write")->required()->check(kOutputFile);
 
   std::string cache_config = "l1=32K:8,l2=256K:8,l3=2M:16", policy = "plru", trace_path;
   auto* cachesim = app.add_subcommand("cachesim", "Replay a Dinero IV din trace through the cache simulator");
-  cachesim->add_option("--config", cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16");
-  cachesim->add_option("--policy", policy, "lru | plru | bitplru");
-  cachesim->add_option("--trace", trace_path, "din trace file")->required();
+  cachesim->add_option("--config", cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
+  cachesim->add_option("--policy", policy, "lru | plru | bitplru")->check(kPolicy);
+  cachesim->add_option("--trace", trace_path, "din trace file (- for standard input)")->required();
 
   try {
     app.parse(argc, argv);
@@ -113,7 +196,8 @@ int main(int argc, char** argv) {
   }
 
   try {
-    if (ro.view > 0) ro.view -= 1;  // the CLI counts views from 1
+    const bool view_given = ro.view > 0;
+    if (view_given) ro.view -= 1;  // the CLI counts views from 1
     if (*list) {
       print_list(list_what, list_what.empty());
       return 0;
@@ -128,7 +212,16 @@ int main(int argc, char** argv) {
       to.csv = csv_path;
       return run_table(table_name, to);
     }
-    Bench bench(load_scene(scene_arg));
+    Scene scene;
+    try {
+      scene = load_scene(scene_arg);
+    } catch (const InputError& e) {
+      throw InputError("--scene: " + std::string(e.what()));
+    }
+    if (view_given && ro.view >= scene.views.size())
+      throw InputError("--view " + std::to_string(ro.view + 1) + ": scene '" + scene.name + "' has " +
+                       std::to_string(scene.views.size()) + " camera views");
+    Bench bench(std::move(scene));
     if (*run) {
       ro.schemes = expand_scheme_list(schemes_arg);
       ro.workloads.clear();
@@ -159,10 +252,16 @@ int main(int argc, char** argv) {
       return 0;
     }
   } catch (const InputError& e) {
-    std::fprintf(stderr, "travbench: error: %s\n", e.what());
+    std::fprintf(stderr, "travbench: error: %s\n", one_line(e.what()).c_str());
     return 2;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "travbench: error: out of memory (a smaller scene or --width/--height may fit)\n");
+    return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "travbench: error: %s\n", e.what());
+    std::fprintf(stderr, "travbench: error: %s\n", one_line(e.what()).c_str());
+    return 1;
+  } catch (...) {
+    std::fprintf(stderr, "travbench: error: unknown exception\n");
     return 1;
   }
   return 0;

@@ -129,7 +129,10 @@ struct Elements {
   bool normalized = false;
 };
 
-Elements resolve_accessor(const tinygltf::Model& m, int index, const std::string& path, const std::string& where) {
+// implicit_limit: the most elements an accessor without bufferView (all zeros, spec §3.6.2.3) may
+// declare. Nothing backs such a count, so without a bound a one-line header could ask for gigabytes.
+Elements resolve_accessor(const tinygltf::Model& m, int index, const std::string& path, const std::string& where,
+                          size_t implicit_limit) {
   if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
     throw InputError(error_line(path, where + "accessor " + std::to_string(index) + " does not exist (" +
                                           std::to_string(m.accessors.size()) + " accessors)"));
@@ -143,7 +146,13 @@ Elements resolve_accessor(const tinygltf::Model& m, int index, const std::string
   e.count = a.count;
   e.component = a.componentType;
   e.normalized = a.normalized;
-  if (a.bufferView < 0) return e;
+  if (a.bufferView < 0) {
+    if (e.count > implicit_limit)
+      throw InputError(error_line(path, wa + "has no bufferView but declares " + std::to_string(e.count) +
+                                            " elements, more than a " + std::to_string(implicit_limit) +
+                                            "-byte file describes"));
+    return e;
+  }
   if (static_cast<size_t>(a.bufferView) >= m.bufferViews.size())
     throw InputError(error_line(path, wa + "bufferView " + std::to_string(a.bufferView) + " does not exist"));
   const tinygltf::BufferView& bv = m.bufferViews[static_cast<size_t>(a.bufferView)];
@@ -217,7 +226,8 @@ uint32_t read_index(const unsigned char* p, int type) {
 
 class Builder {
  public:
-  Builder(const tinygltf::Model& m, const std::string& path, Scene& s) : m_(m), path_(path), s_(s) {}
+  Builder(const tinygltf::Model& m, const std::string& path, Scene& s, size_t implicit_limit)
+      : m_(m), path_(path), s_(s), implicit_limit_(implicit_limit) {}
 
   void add_mesh(int mesh_index, const Mat4& world, const std::string& via) {
     if (mesh_index < 0 || static_cast<size_t>(mesh_index) >= m_.meshes.size())
@@ -240,7 +250,7 @@ class Builder {
     if (pos_it == prim.attributes.end()) return;  // spec: primitives without positions are not rendered
 
     const std::string wp = where + "POSITION ";
-    Elements pos = resolve_accessor(m_, pos_it->second, path_, wp);
+    Elements pos = resolve_accessor(m_, pos_it->second, path_, wp, implicit_limit_);
     const tinygltf::Accessor& pa = m_.accessors[static_cast<size_t>(pos_it->second)];
     if (pa.type != TINYGLTF_TYPE_VEC3) throw InputError(error_line(path_, wp + "accessor must be VEC3"));
     if (pa.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT && pa.componentType != TINYGLTF_COMPONENT_TYPE_BYTE &&
@@ -254,7 +264,7 @@ class Builder {
     std::vector<uint32_t> seq;
     if (prim.indices >= 0) {
       const std::string wi = where + "indices ";
-      Elements idx = resolve_accessor(m_, prim.indices, path_, wi);
+      Elements idx = resolve_accessor(m_, prim.indices, path_, wi, implicit_limit_);
       const tinygltf::Accessor& ia = m_.accessors[static_cast<size_t>(prim.indices)];
       if (ia.type != TINYGLTF_TYPE_SCALAR ||
           (ia.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
@@ -310,14 +320,39 @@ class Builder {
   const tinygltf::Model& m_;
   const std::string& path_;
   Scene& s_;
+  size_t implicit_limit_;
 };
+
+// External buffers (and images) are read through these instead of tinygltf's defaults, which fopen
+// whatever the URI names: a FIFO would block the load forever and a directory or device gives
+// confusing errors. Only regular files are found; reading goes through the same checks as the scene
+// file itself; nothing is ever written.
+bool fs_file_exists(const std::string& abs_filename, void*) {
+  std::error_code ec;
+  return std::filesystem::is_regular_file(abs_filename, ec);
+}
+std::string fs_expand_file_path(const std::string& path, void*) { return path; }
+bool fs_read_whole_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+  try {
+    const std::string bytes = detail::read_file_bytes(path);
+    out->assign(bytes.begin(), bytes.end());
+    return true;
+  } catch (const InputError& e) {
+    if (err) *err += std::string(e.what()) + "\n";
+    return false;
+  }
+}
+bool fs_write_whole_file(std::string* err, const std::string& path, const std::vector<unsigned char>&, void*) {
+  if (err) *err += path + ": the loader never writes files\n";
+  return false;
+}
 
 // Geometry only: leave every image undecoded (see the file comment).
 bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
   return true;
 }
 
-Scene build_scene(const tinygltf::Model& m, const std::string& path) {
+Scene build_scene(const tinygltf::Model& m, const std::string& path, size_t file_bytes) {
   for (const std::string& ext : m.extensionsRequired)
     if (ext == "KHR_draco_mesh_compression" || ext == "EXT_meshopt_compression" || ext == "KHR_meshopt_compression" ||
         ext == "EXT_mesh_gpu_instancing")
@@ -325,7 +360,7 @@ Scene build_scene(const tinygltf::Model& m, const std::string& path) {
 
   Scene s;
   s.name = detail::file_stem(path);
-  Builder b(m, path, s);
+  Builder b(m, path, s, file_bytes);
 
   // Which nodes to draw: the default scene; without one, scene 0 (what viewers do); without any
   // scene, every node that is nobody's child.
@@ -391,6 +426,7 @@ Scene load_gltf(const std::string& path) {
 
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(&skip_image, nullptr);
+  loader.SetFsCallbacks({&fs_file_exists, &fs_expand_file_path, &fs_read_whole_file, &fs_write_whole_file, nullptr});
   tinygltf::Model model;
   std::string err, warn;
   bool ok;
@@ -408,7 +444,7 @@ Scene load_gltf(const std::string& path) {
     if (err.empty()) err = "unknown error";
     throw InputError(error_line(path, std::string(binary ? "invalid GLB file: " : "invalid glTF file: ") + err));
   }
-  return build_scene(model, path);
+  return build_scene(model, path, data.size());
 }
 
 }  // namespace tb

@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -260,7 +261,7 @@ Scene parse_off(const std::string& path, const std::string& data) {
   const long long nv = counts[0], nf = counts[1];
   // Each vertex and face takes at least one line of >= 2 bytes; larger counts are a wrong header or
   // a cut file, and must not turn into a huge reservation.
-  if (nv + nf > static_cast<long long>(data.size()))
+  if (nv > static_cast<long long>(data.size()) || nf > static_cast<long long>(data.size()) - nv)
     throw InputError(error_line(path, "header declares " + std::to_string(nv) + " vertices and " + std::to_string(nf) +
                                           " faces, more than a " + std::to_string(data.size()) +
                                           "-byte file can hold (truncated file or wrong header?)"));
@@ -711,6 +712,7 @@ Scene parse_ply(const std::string& path, const std::string& data) {
   std::vector<uint32_t> face;
   for (const PlyElement& e : h.elements) {
     const bool is_v = &e == ve, is_f = &e == fe;
+    if (e.props.empty()) continue;  // no bytes to read: skip, rather than count to 2^32 for nothing
     for (uint64_t item = 0; item < e.count; ++item) {
       Vec3 p;
       for (size_t pi = 0; pi < e.props.size(); ++pi) {
@@ -735,10 +737,14 @@ Scene parse_ply(const std::string& path, const std::string& data) {
         for (size_t k = 0; k < n; ++k) {
           const double v = in.next(pr.type, indices ? "a face" : "a list");
           if (!indices) continue;
-          if (!(v >= 0 && v < static_cast<double>(ve->count)) || v != std::floor(v))
-            throw InputError(error_line(path, "face " + std::to_string(item) + " uses vertex index " +
-                                                  std::to_string(static_cast<long long>(v)) + " but there are " +
-                                                  std::to_string(ve->count) + " vertices"));
+          if (!(v >= 0 && v < static_cast<double>(ve->count)) || v != std::floor(v)) {
+            // A float-typed index list can hold anything (NaN, 1e300): print it as a number, since
+            // converting such a value to an integer is undefined behaviour.
+            char shown[32];
+            std::snprintf(shown, sizeof shown, "%.17g", v);
+            throw InputError(error_line(path, "face " + std::to_string(item) + " uses vertex index " + shown +
+                                                  " but there are " + std::to_string(ve->count) + " vertices"));
+          }
           face.push_back(static_cast<uint32_t>(v));
         }
         if (indices) {

@@ -22,6 +22,9 @@ std::ofstream open_out(const std::string& path) {
 std::ifstream open_in(const std::string& path, uint64_t& size) {
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec)) throw InputError(path + ": is a directory, not a file");
+  // Before opening: opening a FIFO blocks until a writer appears, and a device has no size.
+  if (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec))
+    throw InputError(path + ": is not a regular file");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw InputError(path + ": cannot open for reading");
   size = std::filesystem::file_size(path, ec);
@@ -40,8 +43,10 @@ void read_exact(std::ifstream& f, T* data, size_t n, const std::string& path, co
 void write_rays(const std::string& path, const RayBatch& b) {
   auto f = open_out(path);
   const uint64_t count = b.rays.size();
-  bool uniform = true;
-  for (uint32_t p = 0; p < b.num_packets(); ++p)
+  // Uniform = exactly what group_uniform(packet_size) rebuilds on reading, empty packets included
+  // (a table like {0, 0} must not come back as {0}).
+  bool uniform = b.packet_size > 0 && b.num_packets() == (count + b.packet_size - 1) / b.packet_size;
+  for (uint32_t p = 0; uniform && p < b.num_packets(); ++p)
     uniform &= b.packet_begin[p] == uint64_t(p) * b.packet_size;
   const uint32_t packet_count = uniform ? 0 : b.num_packets();
   f.write(kRayMagic, 8);

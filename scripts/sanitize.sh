@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# The unit tests under AddressSanitizer + UndefinedBehaviorSanitizer (CMake option
+# TRAVBENCH_SANITIZE): a separate build in build-asan/ (Release, -march=native, no microbenchmarks),
+# then ctest on everything but the slow accuracy/robustness sweeps (their kernels are also run,
+# on smaller inputs, by the suites that stay). Called by scripts/test.sh after the normal build and
+# tests; runs on its own too:
+#
+#   scripts/sanitize.sh                 # build + reduced suite
+#   SANITIZE_ALL=1 scripts/sanitize.sh  # build + every test (slow: ~3x the normal suite)
+#
+# Any sanitizer report fails the test it happens in: UBSan halts on the first error
+# (-fno-sanitize-recover), ASan and LeakSanitizer exit non-zero. Embree and its TBB are Debian's
+# uninstrumented libraries: ASan still checks our side of every call (the buffers we hand Embree
+# are ours), and no report from inside them has been seen, leaks included (tests/README.md). Should
+# one appear, pass a suppressions file through LSAN_OPTIONS / ASAN_OPTIONS (kept when set) rather
+# than excluding the Embree schemes.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+start=$(date +%s)
+
+cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=Release -DTRAVBENCH_SANITIZE=ON -DTRAVBENCH_NATIVE=ON \
+  -DTRAVBENCH_BUILD_BENCH=OFF >/dev/null
+cmake --build build-asan -j "$(nproc)"
+built=$(date +%s)
+
+# The slow sweeps: every scheme x hard case x 5 scenes against the double-precision reference.
+EXCLUDE=${SANITIZE_EXCLUDE:-'^Registry/SchemeRobustness\.'}
+[ "${SANITIZE_ALL:-0}" = 1 ] && EXCLUDE='^$'
+
+export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=0}
+export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+
+cd build-asan
+ctest --output-on-failure -j "$(nproc)" --timeout 900 -E "$EXCLUDE"
+end=$(date +%s)
+echo "sanitize: ASan+UBSan build $((built - start)) s, tests $((end - built)) s (excluded: $EXCLUDE)" >&2

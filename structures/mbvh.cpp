@@ -1,0 +1,324 @@
+#include "structures/mbvh.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+namespace tb {
+
+std::string MBVHBuildParams::key(int width, int tri_width) const {
+  return "mbvh:N=" + std::to_string(width) + ":W=" + std::to_string(tri_width) + ":merge=" + std::to_string(merge) +
+         (sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) : ":greedy") + ":" + bvh.key();
+}
+
+std::string MBVHStats::describe() const {
+  char buf[400];
+  std::snprintf(buf, sizeof buf,
+                "width=%u tri_width=%u nodes=%u leaves=%u blocks=%u max_depth=%u avg_children=%.2f "
+                "avg_leaf_tris=%.2f lane_fill=%.2f sah=%.2f bytes_per_node=%zu bytes_per_tri=%.1f node_bytes=%zu "
+                "tri_bytes=%zu bvh_build_ms=%.1f collapse_ms=%.1f",
+                width, tri_width, nodes, leaves, blocks, max_depth, avg_children, avg_leaf_tris, lane_fill, sah_cost,
+                nodes ? node_bytes / nodes : size_t(0), triangles ? double(tri_bytes) / triangles : 0.0, node_bytes,
+                tri_bytes, bvh_build_ms, collapse_ms);
+  return buf;
+}
+
+namespace {
+
+template <int N, int W>
+class Collapser {
+ public:
+  Collapser(const Scene& scene, const BVH& bvh, const MBVHBuildParams& p, MBVH<N, W>& out)
+      : scene_(scene), bvh_(bvh), p_(p), out_(out) {
+    // The triangle range of every binary subtree: the binned builder partitions prim_index in
+    // place, so a subtree's triangles are contiguous.
+    first_.assign(bvh.nodes.size(), 0);
+    count_.assign(bvh.nodes.size(), 0);
+    range();
+    if (p.sah_collapse) optimise();
+  }
+
+  void run() {
+    const uint32_t tris = uint32_t(bvh_.prim_index.size());
+    out_.nodes.reserve(std::max<size_t>(1, 2 * tris / N + 1));
+    out_.blocks.reserve((tris + W - 1) / W + tris / 2 + 1);
+    std::vector<uint32_t> top;
+    if (tris > 0) {
+      if (as_leaf(0)) top.push_back(0);
+      else top = kids_of(0);
+    }
+    out_.nodes.emplace_back();
+    fill(0, std::move(top), 1);
+  }
+
+ private:
+  void range() {
+    // Pre-order from the root, then reverse pre-order: every child after its parent, whatever
+    // the node numbering (the parallel builder does not number children after parents).
+    if (bvh_.nodes.empty()) return;
+    std::vector<uint32_t>& order = order_;
+    std::vector<uint32_t> stack{0};
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      order.push_back(i);
+      const BVHNode& n = bvh_.nodes[i];
+      if (!n.is_leaf() && n.left_first != 0) stack.push_back(n.left_first), stack.push_back(n.left_first + 1);
+    }
+    for (size_t k = order.size(); k-- > 0;) {
+      const uint32_t i = order[k];
+      const BVHNode& n = bvh_.nodes[i];
+      if (n.is_leaf()) {
+        first_[i] = n.left_first, count_[i] = n.count;
+      } else if (n.left_first != 0) {
+        first_[i] = std::min(first_[n.left_first], first_[n.left_first + 1]);
+        count_[i] = count_[n.left_first] + count_[n.left_first + 1];
+      }
+    }
+  }
+  bool as_leaf(uint32_t b) const {
+    if (p_.sah_collapse) return leaf_[b] != 0;
+    return bvh_.nodes[b].is_leaf() || (p_.merge > 0 && count_[b] <= uint32_t(p_.merge));
+  }
+
+  // The SAH collapse. F(n, j): the least cost of binary subtree n as a forest of at most j roots
+  // in the wide tree; F(n, 1) = min(leaf cost, node cost); a node costs its area plus the best
+  // split of its N slots between its two binary children (D(n, N)); F(n, j > 1) may dissolve n
+  // into its children's forests (D(n, j)). Children before parents: reverse pre-order.
+  void optimise() {
+    const size_t nb = bvh_.nodes.size();
+    F_.assign(nb, {});
+    split_.assign(nb, {});
+    leaf_.assign(nb, 0);
+    node_split_.assign(nb, 1);
+    const double ci = p_.tri_cost / 100.0;
+    const uint32_t max_leaf = std::min<uint32_t>(mbvh_ref::kMaxLeafTris, uint32_t(std::max(p_.merge, W)));
+    for (size_t k = order_.size(); k-- > 0;) {
+      const uint32_t n = order_[k];
+      const BVHNode& bn = bvh_.nodes[n];
+      const double area = box_of(n).area();
+      const double leaf_cost = count_[n] <= max_leaf || bn.is_leaf()
+                                   ? ci * area * double((count_[n] + W - 1) / W)
+                                   : INFINITY;
+      auto& F = F_[n];
+      if (bn.is_leaf()) {
+        leaf_[n] = 1;
+        for (int j = 1; j <= N; ++j) F[j] = leaf_cost;
+        continue;
+      }
+      const uint32_t l = bn.left_first, r = bn.left_first + 1;
+      double D[N + 1];
+      for (int j = 2; j <= N; ++j) {
+        D[j] = INFINITY;
+        for (int kk = 1; kk < j; ++kk) {
+          const double c = F_[l][kk] + F_[r][j - kk];
+          if (c < D[j]) D[j] = c, split_[n][j] = uint8_t(kk);
+        }
+      }
+      const double node_cost = area + D[N];
+      node_split_[n] = split_[n][N];  // how n's N slots divide if n becomes a node
+      leaf_[n] = leaf_cost <= node_cost;
+      F[1] = std::min(leaf_cost, node_cost);
+      for (int j = 2; j <= N; ++j) {
+        if (D[j] < F[j - 1]) {
+          F[j] = D[j];
+        } else {
+          F[j] = F[j - 1];
+          split_[n][j] = 0;  // keep n as one root
+        }
+      }
+    }
+  }
+  // The roots of binary subtree n as a forest of at most j wide-tree slots.
+  void roots(uint32_t n, int j, std::vector<uint32_t>& out) const {
+    while (j > 1 && split_[n][j] == 0) --j;
+    if (j <= 1) {
+      out.push_back(n);
+      return;
+    }
+    const int k = split_[n][j];
+    roots(bvh_.nodes[n].left_first, k, out);
+    roots(bvh_.nodes[n].left_first + 1, j - k, out);
+  }
+  // The children of binary node b when it becomes a wide node.
+  std::vector<uint32_t> kids_of(uint32_t b) const {
+    std::vector<uint32_t> kids;
+    if (p_.sah_collapse) {
+      const int k = node_split_[b];
+      roots(bvh_.nodes[b].left_first, k, kids);
+      roots(bvh_.nodes[b].left_first + 1, N - k, kids);
+    } else {
+      kids = {bvh_.nodes[b].left_first, bvh_.nodes[b].left_first + 1};
+    }
+    return kids;
+  }
+  AABB box_of(uint32_t b) const { return {bvh_.nodes[b].lo, bvh_.nodes[b].hi}; }
+
+  // Fills node `idx` with the binary subtrees `kids` (greedy: after opening the largest ones).
+  void fill(uint32_t idx, std::vector<uint32_t> kids, uint32_t depth) {
+    out_.stats.max_depth = std::max(out_.stats.max_depth, depth);
+    while (!p_.sah_collapse && kids.size() < size_t(N)) {
+      int best = -1;
+      float best_area = -1.f;
+      for (size_t i = 0; i < kids.size(); ++i) {
+        if (as_leaf(kids[i])) continue;
+        const float a = box_of(kids[i]).area();
+        if (a > best_area) best_area = a, best = int(i);
+      }
+      if (best < 0) break;
+      const uint32_t open = kids[size_t(best)];
+      kids[size_t(best)] = bvh_.nodes[open].left_first;
+      kids.insert(kids.begin() + best + 1, bvh_.nodes[open].left_first + 1);
+    }
+    if (kids.size() > size_t(N)) throw std::logic_error("mbvh: collapse produced more than N children");
+    MBVHNode<N> node;
+    for (int a = 0; a < 3; ++a)
+      for (int i = 0; i < N; ++i) node.box[a][i] = INFINITY, node.box[3 + a][i] = -INFINITY;
+    for (int i = 0; i < N; ++i) node.ref[i] = 0;
+    node.num_children = uint32_t(kids.size());
+    for (size_t i = 0; i < kids.size(); ++i) {
+      const AABB b = box_of(kids[i]);
+      for (int a = 0; a < 3; ++a) node.box[a][i] = b.lo[a], node.box[3 + a][i] = b.hi[a];
+    }
+    // Leaves first (they need no recursion), then the interior children in depth-first order,
+    // so a node's first interior child sits right after it in memory.
+    for (size_t i = 0; i < kids.size(); ++i)
+      if (as_leaf(kids[i])) node.ref[i] = make_leaf(first_[kids[i]], count_[kids[i]]);
+    std::vector<std::pair<size_t, uint32_t>> interior;
+    for (size_t i = 0; i < kids.size(); ++i)
+      if (!as_leaf(kids[i])) {
+        node.ref[i] = uint32_t(out_.nodes.size());
+        interior.push_back({i, node.ref[i]});
+        out_.nodes.emplace_back();
+      }
+    out_.nodes[idx] = node;
+    for (const auto& [slot, child] : interior) fill(child, kids_of(kids[slot]), depth + 1);
+  }
+
+  uint32_t make_leaf(uint32_t first, uint32_t count) {
+    if (count == 0 || count > mbvh_ref::kMaxLeafTris)
+      throw std::runtime_error("mbvh: leaf of " + std::to_string(count) + " triangles (merge/leaf_size must be <= 64)");
+    const uint32_t block0 = uint32_t(out_.blocks.size());
+    const uint32_t nblocks = (count + W - 1) / W;
+    if (size_t(block0) + nblocks > mbvh_ref::kMaxBlocks) throw std::runtime_error("mbvh: too many triangle blocks");
+    for (uint32_t k = 0; k < nblocks; ++k) {
+      TriBlock<W> blk;
+      for (uint32_t l = 0; l < uint32_t(W); ++l) {
+        const uint32_t slot = std::min(k * W + l, count - 1);  // pad with the leaf's last triangle
+        const uint32_t tri = bvh_.prim_index[first + slot];
+        for (int c = 0; c < 3; ++c) {
+          const Vec3 v = scene_.vertex(tri, c);
+          blk.v[c][0][l] = v.x, blk.v[c][1][l] = v.y, blk.v[c][2][l] = v.z;
+        }
+        blk.prim[l] = tri;
+      }
+      out_.blocks.push_back(blk);
+    }
+    out_.stats.leaves++;
+    return mbvh_ref::make_leaf(block0, count);
+  }
+
+  const Scene& scene_;
+  const BVH& bvh_;
+  const MBVHBuildParams& p_;
+  MBVH<N, W>& out_;
+  std::vector<uint32_t> first_, count_, order_;
+  std::vector<std::array<double, N + 1>> F_;
+  std::vector<std::array<uint8_t, N + 1>> split_;
+  std::vector<uint8_t> leaf_, node_split_;
+};
+
+}  // namespace
+
+template <int N, int W>
+MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBuildParams& params) {
+  const auto t0 = std::chrono::steady_clock::now();
+  MBVH m;
+  Collapser<N, W>(scene, bvh, params, m).run();
+  MBVHStats& s = m.stats;
+  s.width = N, s.tri_width = W;
+  s.nodes = uint32_t(m.nodes.size());
+  s.blocks = uint32_t(m.blocks.size());
+  s.triangles = uint32_t(bvh.prim_index.size());
+  s.node_bytes = m.nodes.size() * sizeof(Node);
+  s.tri_bytes = m.blocks.size() * sizeof(Block);
+  s.bvh_build_ms = bvh.stats.build_ms;
+  uint64_t children = 0;
+  double cost = 0;
+  AABB root;
+  for (const Node& n : m.nodes)
+    for (uint32_t i = 0; i < n.num_children; ++i) root.grow(n.child_box(int(i)));
+  const double root_area = std::max(1e-30f, root.area());
+  // SAH cost with the thesis' unit costs: one per node visit, one per SIMD block test.
+  for (const Node& n : m.nodes) {
+    children += n.num_children;
+    for (uint32_t i = 0; i < n.num_children; ++i) {
+      const double a = n.child_box(int(i)).area() / root_area;
+      cost += mbvh_ref::is_leaf(n.ref[i]) ? a * ((mbvh_ref::num_tris(n.ref[i]) + W - 1) / W) : a;
+    }
+  }
+  s.sah_cost = cost + (m.nodes[0].num_children ? 1.0 : 0.0);
+  s.avg_children = s.nodes ? double(children) / s.nodes : 0.0;
+  s.avg_leaf_tris = s.leaves ? double(s.triangles) / s.leaves : 0.0;
+  s.lane_fill = s.blocks ? double(s.triangles) / (double(s.blocks) * W) : 0.0;
+  s.collapse_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return m;
+}
+
+template <int N, int W>
+std::vector<uint32_t> MBVH<N, W>::lane_prims() const {
+  std::vector<uint32_t> out;
+  out.reserve(blocks.size() * W);
+  for (const Block& b : blocks)
+    for (int l = 0; l < W; ++l) out.push_back(b.prim[l]);
+  return out;
+}
+
+template struct MBVH<4, 4>;
+template struct MBVH<8, 4>;
+template struct MBVH<8, 8>;
+
+MBVHBuildParams mbvh_params(const SchemeConfig& cfg, int default_leaf, int default_merge, bool default_sah) {
+  const SchemeConfig& c = cfg;
+  MBVHBuildParams p;
+  p.sah_collapse = default_sah;
+  p.bvh.bins = c.get_int("bins", p.bvh.bins);
+  p.bvh.max_leaf = c.get_int("leaf_size", default_leaf);
+  p.merge = c.get_int("merge", default_merge);
+  p.tri_cost = c.get_int("tri_cost", p.tri_cost);
+  if (auto it = c.params.find("collapse"); it != c.params.end()) {
+    if (it->second != "greedy" && it->second != "sah") throw InputError("parameter collapse must be greedy or sah");
+    p.sah_collapse = it->second == "sah";
+  }
+  if (p.tri_cost < 1 || p.tri_cost > 10000) throw InputError("parameter tri_cost must be in [1, 10000]");
+  if (p.bvh.bins < 2 || p.bvh.bins > 256) throw InputError("parameter bins must be in [2, 256]");
+  if (p.bvh.max_leaf < 1 || p.bvh.max_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");
+  if (p.merge < 0 || p.merge > 64) throw InputError("parameter merge must be in [0, 64]");
+  return p;
+}
+
+template <int N, int W>
+MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel) {
+  MBVHData<N, W> d;
+  const std::string key = params.key(N, W);
+  // The cache holds its lock while building, so the binary BVH is fetched first, not inside.
+  auto bvh = cache.get<BVH>(params.bvh.key(), [&] { return BVH::build(scene, params.bvh); });
+  d.mbvh = cache.get<MBVH<N, W>>(key, [&] { return MBVH<N, W>::collapse(scene, *bvh, params); });
+  if (kernel != TriKernel::watertight) {
+    const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
+    d.tris = cache.get<TriangleSet>(key + (planes ? ":tris+planes" : ":tris"), [&] {
+      TriangleSet t;
+      t.build(scene, d.mbvh->lane_prims(), kernel);
+      return t;
+    });
+  }
+  return d;
+}
+
+template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
+template MBVHData<8, 4> fetch_mbvh<8, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
+template MBVHData<8, 8> fetch_mbvh<8, 8>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
+
+}  // namespace tb
