@@ -91,22 +91,39 @@ def plot_run(path):
 
 
 def plot_accuracy(path):
-    rows = read(path)
-    fig, ax = plt.subplots(figsize=(9, 5.5))
+    """One panel per workload: Mrays/s against mismatch rate, colour = scheme, marker = kernel."""
+    rows = [r for r in read(path) if r.get("offset", "0") == "0"]
+    workloads = list(dict.fromkeys(r["workload"] for r in rows))
     markers = {"watertight": "o", "moller": "s", "plane": "^", "plane_rcp": "v", "embree_robust": "D",
                "embree_default": "P"}
-    for (s, k) in sorted({(r["scheme"], r["kernel"]) for r in rows}):
-        pts = [r for r in rows if r["scheme"] == s and r["kernel"] == k]
-        xs = [num(r, "mrays_median") for r in pts]
-        # zero error is drawn at the axis floor so it stays visible on the log scale
-        ys = [max(num(r, "mismatch_rate"), 1e-7) for r in pts]
-        ax.scatter(xs, ys, color=colour(s), marker=markers.get(k, "x"), s=22, alpha=0.75, label=f"{s} / {k}")
-    ax.set_yscale("log")
-    ax.set_xlabel("Mrays/s (median, 1 thread)")
-    ax.axhline(1e-5, color="red", lw=0.8, ls="--")
-    ax.text(ax.get_xlim()[1], 1.1e-5, " accuracy bar 1e-5", color="red", fontsize=7, ha="right")
-    finish(fig, ax, path.with_suffix(".png"), "speed vs error, every scheme x kernel, all workloads (floor = 0)",
-           "mismatch rate vs reference")
+    cols = 4
+    nrows = (len(workloads) + cols - 1) // cols
+    fig, axes = plt.subplots(nrows, cols, figsize=(16, 3.2 * nrows), squeeze=False)
+    for ax, w in zip(axes.flat, workloads):
+        for r in (r for r in rows if r["workload"] == w):
+            ax.scatter(num(r, "mrays_median"), max(num(r, "mismatch_rate"), 1e-6), color=colour(r["scheme"]),
+                       marker=markers.get(r["kernel"], "x"), s=22, alpha=0.8)
+        ax.set_yscale("log")
+        ax.set_ylim(5e-7, 2)
+        ax.axhline(1e-5, color="red", lw=0.8, ls="--")
+        ax.set_title(w, fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[len(workloads):]:
+        ax.axis("off")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("mismatch rate (floor = 0)")
+    for ax in axes[-1]:
+        ax.set_xlabel("Mrays/s")
+    handles = [plt.Line2D([], [], marker="o", color=colour(s), linestyle="") for s in ordered(r["scheme"] for r in rows)]
+    labels = ordered(r["scheme"] for r in rows)
+    handles += [plt.Line2D([], [], marker=m, color="gray", linestyle="") for m in markers.values()]
+    labels += list(markers)
+    fig.suptitle(f"{rows[0]['scene'] if rows else ''}: speed vs error per workload (red: 1e-5 accuracy bar)")
+    fig.tight_layout(rect=(0, 0, 0.87, 1))
+    fig.legend(handles, labels, loc="center right", fontsize=7, ncol=1)
+    fig.savefig(path.with_suffix(".png"), dpi=100)
+    plt.close(fig)
+    print(f"wrote {path.with_suffix('.png')}")
 
 
 def plot_divergence(path):
