@@ -10,7 +10,8 @@ namespace tb {
 
 std::string MBVHBuildParams::key(int width, int tri_width) const {
   return "mbvh:N=" + std::to_string(width) + ":W=" + std::to_string(tri_width) + ":merge=" + std::to_string(merge) +
-         (sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) : ":greedy") + ":" + bvh.key();
+         (sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) : ":greedy") + ":small=" + std::to_string(small) + ":" +
+         bvh.key();
 }
 
 std::string MBVHStats::describe() const {
@@ -32,6 +33,7 @@ class Collapser {
  public:
   Collapser(const Scene& scene, const BVH& bvh, const MBVHBuildParams& p, MBVH<N, W>& out)
       : scene_(scene), bvh_(bvh), p_(p), out_(out) {
+    out_.small_leaf = W == 8 ? uint32_t(p.small) : 0;
     // The triangle range of every binary subtree: the binned builder partitions prim_index in
     // place, so a subtree's triangles are contiguous.
     first_.assign(bvh.nodes.size(), 0);
@@ -99,9 +101,9 @@ class Collapser {
       const uint32_t n = order_[k];
       const BVHNode& bn = bvh_.nodes[n];
       const double area = box_of(n).area();
-      const double leaf_cost = count_[n] <= max_leaf || bn.is_leaf()
-                                   ? ci * area * double((count_[n] + W - 1) / W)
-                                   : INFINITY;
+      // Blocks tested; a small leaf's 4-wide block counts half (half the bytes and lanes).
+      const double blocks = count_[n] <= out_.small_leaf ? 0.5 : double((count_[n] + W - 1) / W);
+      const double leaf_cost = count_[n] <= max_leaf || bn.is_leaf() ? ci * area * blocks : INFINITY;
       auto& F = F_[n];
       if (bn.is_leaf()) {
         leaf_[n] = 1;
@@ -200,24 +202,33 @@ class Collapser {
   uint32_t make_leaf(uint32_t first, uint32_t count) {
     if (count == 0 || count > mbvh_ref::kMaxLeafTris)
       throw std::runtime_error("mbvh: leaf of " + std::to_string(count) + " triangles (merge/leaf_size must be <= 64)");
+    out_.stats.leaves++;
+    if (count <= out_.small_leaf) {
+      const uint32_t block = uint32_t(out_.small.size());
+      if (block >= mbvh_ref::kMaxBlocks) throw std::runtime_error("mbvh: too many triangle blocks");
+      out_.small.push_back(block_of<4>(first, count, 0));
+      return mbvh_ref::make_leaf(block, count);
+    }
     const uint32_t block0 = uint32_t(out_.blocks.size());
     const uint32_t nblocks = (count + W - 1) / W;
     if (size_t(block0) + nblocks > mbvh_ref::kMaxBlocks) throw std::runtime_error("mbvh: too many triangle blocks");
-    for (uint32_t k = 0; k < nblocks; ++k) {
-      TriBlock<W> blk;
-      for (uint32_t l = 0; l < uint32_t(W); ++l) {
-        const uint32_t slot = std::min(k * W + l, count - 1);  // pad with the leaf's last triangle
-        const uint32_t tri = bvh_.prim_index[first + slot];
-        for (int c = 0; c < 3; ++c) {
-          const Vec3 v = scene_.vertex(tri, c);
-          blk.v[c][0][l] = v.x, blk.v[c][1][l] = v.y, blk.v[c][2][l] = v.z;
-        }
-        blk.prim[l] = tri;
-      }
-      out_.blocks.push_back(blk);
-    }
-    out_.stats.leaves++;
+    for (uint32_t k = 0; k < nblocks; ++k) out_.blocks.push_back(block_of<W>(first, count, k));
     return mbvh_ref::make_leaf(block0, count);
+  }
+  // Block k of the leaf over prim_index[first, first + count), padded with its last triangle.
+  template <int B>
+  TriBlock<B> block_of(uint32_t first, uint32_t count, uint32_t k) const {
+    TriBlock<B> blk;
+    for (uint32_t l = 0; l < uint32_t(B); ++l) {
+      const uint32_t slot = std::min(k * B + l, count - 1);
+      const uint32_t tri = bvh_.prim_index[first + slot];
+      for (int c = 0; c < 3; ++c) {
+        const Vec3 v = scene_.vertex(tri, c);
+        blk.v[c][0][l] = v.x, blk.v[c][1][l] = v.y, blk.v[c][2][l] = v.z;
+      }
+      blk.prim[l] = tri;
+    }
+    return blk;
   }
 
   const Scene& scene_;
@@ -240,10 +251,10 @@ MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBu
   MBVHStats& s = m.stats;
   s.width = N, s.tri_width = W;
   s.nodes = uint32_t(m.nodes.size());
-  s.blocks = uint32_t(m.blocks.size());
+  s.blocks = uint32_t(m.blocks.size() + m.small.size());
   s.triangles = uint32_t(bvh.prim_index.size());
   s.node_bytes = m.nodes.size() * sizeof(Node);
-  s.tri_bytes = m.blocks.size() * sizeof(Block);
+  s.tri_bytes = m.blocks.size() * sizeof(Block) + m.small.size() * sizeof(TriBlock<4>);
   s.bvh_build_ms = bvh.stats.build_ms;
   uint64_t children = 0;
   double cost = 0;
@@ -256,13 +267,15 @@ MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBu
     children += n.num_children;
     for (uint32_t i = 0; i < n.num_children; ++i) {
       const double a = n.child_box(int(i)).area() / root_area;
-      cost += mbvh_ref::is_leaf(n.ref[i]) ? a * ((mbvh_ref::num_tris(n.ref[i]) + W - 1) / W) : a;
+      const uint32_t nt = mbvh_ref::num_tris(n.ref[i]);
+      cost += !mbvh_ref::is_leaf(n.ref[i]) ? a : nt <= m.small_leaf ? 0.5 * a : a * double((nt + W - 1) / W);
     }
   }
   s.sah_cost = cost + (m.nodes[0].num_children ? 1.0 : 0.0);
   s.avg_children = s.nodes ? double(children) / s.nodes : 0.0;
   s.avg_leaf_tris = s.leaves ? double(s.triangles) / s.leaves : 0.0;
-  s.lane_fill = s.blocks ? double(s.triangles) / (double(s.blocks) * W) : 0.0;
+  const double lanes = double(m.blocks.size()) * W + double(m.small.size()) * 4;
+  s.lane_fill = lanes > 0 ? double(s.triangles) / lanes : 0.0;
   s.collapse_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return m;
 }
@@ -270,9 +283,11 @@ MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBu
 template <int N, int W>
 std::vector<uint32_t> MBVH<N, W>::lane_prims() const {
   std::vector<uint32_t> out;
-  out.reserve(blocks.size() * W);
+  out.reserve(blocks.size() * W + small.size() * 4);
   for (const Block& b : blocks)
     for (int l = 0; l < W; ++l) out.push_back(b.prim[l]);
+  for (const TriBlock<4>& b : small)
+    for (int l = 0; l < 4; ++l) out.push_back(b.prim[l]);
   return out;
 }
 
@@ -292,6 +307,8 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, int default_leaf, int defau
     if (it->second != "greedy" && it->second != "sah") throw InputError("parameter collapse must be greedy or sah");
     p.sah_collapse = it->second == "sah";
   }
+  p.small = c.get_int("small", p.small);
+  if (p.small != 0 && p.small != 4) throw InputError("parameter small must be 0 or 4");
   if (p.tri_cost < 1 || p.tri_cost > 10000) throw InputError("parameter tri_cost must be in [1, 10000]");
   if (p.bvh.bins < 2 || p.bvh.bins > 256) throw InputError("parameter bins must be in [2, 256]");
   if (p.bvh.max_leaf < 1 || p.bvh.max_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");

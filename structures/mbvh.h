@@ -85,6 +85,8 @@ struct MBVHBuildParams {
   // sum(area * node cost) + sum(area * block tests * tri_cost / 100).
   bool sah_collapse = false;
   int tri_cost = 100;  // cost of one triangle-block test in percent of a node visit
+  // 8-wide blocks: leaves of up to `small` triangles (0 or 4) take a 4-wide block instead.
+  int small = 4;
   std::string key(int width, int tri_width) const;
 };
 
@@ -104,14 +106,21 @@ struct MBVH {
   using Block = TriBlock<W>;
   aligned_vector<Node> nodes;    // nodes[0] = root (always an interior node, possibly with 0 or 1 child)
   aligned_vector<Block> blocks;  // leaf triangles in depth-first leaf order
+  // With 8-wide blocks, leaves of at most 4 triangles take one 4-wide block here instead (the
+  // leaf's triangle count says which array): half the bytes of a mostly empty 8-wide block.
+  aligned_vector<TriBlock<4>> small;
+  uint32_t small_leaf = 0;  // leaves of at most this many triangles are small (0 or 4; 0 when W = 4)
   MBVHStats stats;
 
-  // SAH-aware collapse (Wald et al. 2008): start from the binary node's two children and
-  // repeatedly open the interior child with the largest surface area until there are N.
+  // Collapses the binary BVH (whose subtrees hold contiguous ranges of prim_index). Greedy
+  // (Dammertz et al. 2008, the thesis' construction): start from the binary node's two children
+  // and repeatedly open the interior child with the largest surface area until there are N.
+  // SAH (params.sah_collapse): the dynamic programme described at MBVHBuildParams.
   static MBVH collapse(const Scene& scene, const BVH& bvh, const MBVHBuildParams& params);
-  // Scene triangle of every block lane (block * W + lane): the order of the TriangleSet the
-  // scalar kernels (--kernel moller/plane/plane_rcp) index.
+  // Scene triangle of every block lane (block * W + lane, then the small blocks' lanes): the
+  // order of the TriangleSet the scalar kernels (--kernel moller/plane/plane_rcp) index.
   std::vector<uint32_t> lane_prims() const;
+  uint32_t small_lane(uint32_t block, uint32_t lane) const { return uint32_t(blocks.size()) * W + block * 4 + lane; }
 };
 extern template struct MBVH<4, 4>;
 extern template struct MBVH<8, 4>;
@@ -130,7 +139,7 @@ size_t mbvh_bytes(const MBVHData<N, W>& d, TriKernel k) {
          (d.tris ? d.tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t)) : 0);
 }
 // Build parameters from a scheme's config: `bins`, `leaf_size` (binary BVH), `merge`,
-// `collapse` (greedy | sah), `tri_cost`.
+// `collapse` (greedy | sah), `tri_cost`, `small` (0 | 4).
 MBVHBuildParams mbvh_params(const SchemeConfig& cfg, int default_leaf, int default_merge, bool default_sah = false);
 // Fetches (building on first use; the binary BVH is shared through the cache too) the MBVH.
 template <int N, int W>
@@ -300,11 +309,15 @@ inline typename mbvh_simd::V<N>::f box_test(const MBVHNode<N>& nd, const NodeRay
 template <int W>
 struct TriRay {
   using f = typename mbvh_simd::V<W>::f;
+  struct NoHalf {};
   f ox, oy, oz;  // origin, permuted (kx, ky, kz)
   f sx, sy, sz;
   Vec3 org, dir;
   float tmin, szs;
   uint32_t kx, ky, kz;
+  // 8 wide: the 4-wide constants for the small leaves.
+  [[no_unique_address]] std::conditional_t<W == 8, TriRay<4>, NoHalf> half;
+  TriRay() = default;
   TriRay(const RayCtx& rc, float t0) : TriRay(rc.org, rc.dir, rc.kx, rc.ky, rc.kz, rc.sx, rc.sy, rc.sz, t0) {}
   TriRay(Vec3 o, Vec3 d, int kx_, int ky_, int kz_, float sx_, float sy_, float sz_, float t0) {
     using S = mbvh_simd::V<W>;
@@ -312,6 +325,7 @@ struct TriRay {
     ox = S::set1(o[kx_]), oy = S::set1(o[ky_]), oz = S::set1(o[kz_]);
     sx = S::set1(sx_), sy = S::set1(sy_), sz = S::set1(sz_);
     org = o, dir = d, tmin = t0, szs = sz_;
+    if constexpr (W == 8) half = TriRay<4>(o, d, kx_, ky_, kz_, sx_, sy_, sz_, t0);
   }
 };
 
@@ -391,7 +405,8 @@ template <int W>
   return found;
 }
 
-// Tests the triangles of leaf `ref` for one ray. The watertight kernel runs on the SIMD blocks;
+// Tests the triangles of leaf `ref` in an array of W-wide blocks for one ray (a layout without
+// small leaves: MBVH<4, 4>, RayGrid's mini-MBVHs). The watertight kernel runs on the SIMD blocks;
 // the scalar kernels (moller, plane, plane_rcp) run kernels.h's tests lane by lane on `ts`.
 template <int W, TriKernel K>
 inline void leaf_test(const TriBlock<W>* blocks, const TriangleSet* ts, const TriRay<W>& tr, const RayCtx* rc,
@@ -418,16 +433,44 @@ inline void probe_leaf(const TriBlock<W>* blocks, uint32_t ref, P& probe, uint32
       probe.tris(&blocks[first + k], sizeof(TriBlock<W>), std::min<uint32_t>(W, ntris - k * W) * active);
   }
 }
+// The same on an MBVH, whose small leaves (8-wide layout, <= 4 triangles) sit in 4-wide blocks.
+template <int N, int W, TriKernel K>
+inline void leaf_test(const MBVH<N, W>& m, const TriangleSet* ts, const TriRay<W>& tr, const RayCtx* rc, uint32_t ref,
+                      Hit& hit) {
+  const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
+  if constexpr (W == 8) {
+    if (ntris <= m.small_leaf) {
+      if constexpr (K == TriKernel::watertight) {
+        block_intersect<4>(tr.half, m.small[first], hit);
+      } else {
+        for (uint32_t l = 0; l < ntris; ++l) intersect_tri<K>(*rc, *ts, m.small_lane(first, l), tr.tmin, hit);
+      }
+      return;
+    }
+  }
+  leaf_test<W, K>(m.blocks.data(), ts, tr, rc, ref, hit);
+}
+template <int N, int W, class P>
+inline void probe_leaf(const MBVH<N, W>& m, uint32_t ref, P& probe, uint32_t active) {
+  if constexpr (P::enabled) {
+    const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
+    if (ntris <= m.small_leaf) {
+      probe.leaf(&m.small[first], 0, active);
+      probe.tris(&m.small[first], sizeof(TriBlock<4>), ntris * active);
+      return;
+    }
+    probe_leaf<W>(m.blocks.data(), ref, probe, active);
+  }
+}
 
-// Starts fetching a child that goes onto the stack: single-ray traversal is bound by the
-// latency of one dependent node fetch after another, and a pushed child is usually visited
-// (it was entered before the closest hit known so far).
+// Starts fetching a node that goes onto the stack: single-ray traversal is bound by the latency
+// of one dependent node fetch after another, and a pushed child is usually visited (it was
+// entered before the closest hit known so far).
 template <int N, int W>
 inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
-  const char* p = mbvh_ref::is_leaf(ref) ? reinterpret_cast<const char*>(&m.blocks[mbvh_ref::first_block(ref)])
-                                         : reinterpret_cast<const char*>(&m.nodes[ref]);
-  constexpr int kLines = int(mbvh_ref::is_leaf(0) ? 0 : sizeof(MBVHNode<N>) / 64);
-  for (int l = 0; l < kLines; ++l) _mm_prefetch(p + 64 * l, _MM_HINT_T0);
+  if (mbvh_ref::is_leaf(ref)) return;
+  const char* p = reinterpret_cast<const char*>(&m.nodes[ref]);
+  for (size_t l = 0; l < sizeof(MBVHNode<N>); l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
 }
 
 struct MBVHStackEntry {
@@ -447,7 +490,7 @@ inline float lane(__m256 v, uint32_t i) {
 
 // Sorts the `count` (>= 3) entered children near-to-far and writes all but the nearest to
 // out[0 .. count-2], farthest first (so the second nearest ends on top); returns the nearest.
-// Writes N entries: the stack has N slots of slack.
+// Writes N entries (see mbvh_traverse for why the stack always has room for them).
 template <int N>
 inline uint32_t push_sorted(const MBVHNode<N>& nd, typename mbvh_simd::V<N>::f tn, typename mbvh_simd::V<N>::f entered,
                             int count, MBVHStackEntry* out) {
@@ -482,13 +525,13 @@ inline uint32_t push_sorted(const MBVHNode<N>& nd, typename mbvh_simd::V<N>::f t
 // tested at once; one hit child is entered directly, two are compared, three or more are sorted
 // with the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8); the nearest is entered
 // and the others are pushed far-to-near with their entry distances. Starts at `start` (the root,
-// or a subtree when mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+N+1 entries.
+// or a subtree when mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries
+// (at depth d at most (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
 template <int N, int W, TriKernel K, class P>
 inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
                           const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
   using S = mbvh_simd::V<N>;
   const MBVHNode<N>* nodes = m.nodes.data();
-  const TriBlock<W>* blocks = m.blocks.data();
   uint32_t sp = 0, cur = start;
   float tfar = hit.t;  // a register copy: stack stores could alias hit.t and force reloads
   for (;;) {
@@ -527,8 +570,8 @@ inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const Node
         continue;
       }
     } else {
-      probe_leaf<W>(blocks, cur, probe, 1);
-      leaf_test<W, K>(blocks, ts, tr, rc, cur, hit);
+      probe_leaf(m, cur, probe, 1);
+      leaf_test<N, W, K>(m, ts, tr, rc, cur, hit);
       tfar = hit.t;
     }
     // Pop the nearest pending child that may still hold a closer hit.

@@ -34,7 +34,13 @@ void check_invariants(const Scene& s, const MBVH<N, W>& m, const MBVHBuildParams
   EXPECT_EQ(sizeof(MBVHNode<N>) % 64, 0u);
   EXPECT_EQ(reinterpret_cast<uintptr_t>(m.blocks.data()) % (4 * W), 0u) << "blocks must be SIMD aligned";
   EXPECT_EQ(m.stats.nodes, m.nodes.size());
-  EXPECT_EQ(m.stats.blocks, m.blocks.size());
+  EXPECT_EQ(m.stats.blocks, m.blocks.size() + m.small.size());
+  if (!m.small.empty()) {
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(m.small.data()) % 16, 0u);
+  }
+  if (W == 4) {
+    EXPECT_TRUE(m.small.empty()) << "4-wide blocks need no small blocks";
+  }
   std::vector<int> seen(s.num_triangles(), 0);
   std::vector<int> node_seen(m.nodes.size(), 0);
   uint32_t leaves = 0;
@@ -72,16 +78,29 @@ void check_invariants(const Scene& s, const MBVH<N, W>& m, const MBVHBuildParams
       ++leaves;
       const uint32_t first = mbvh_ref::first_block(ref), cnt = mbvh_ref::num_tris(ref);
       EXPECT_LE(cnt, uint32_t(std::max({p.bvh.max_leaf, p.merge, p.sah_collapse ? W : 0})));
-      ASSERT_LE(size_t(first) + (cnt + W - 1) / W, m.blocks.size());
-      for (uint32_t k = 0; k < (cnt + W - 1) / W * W; ++k) {
-        const TriBlock<W>& blk = m.blocks[first + k / W];
-        const uint32_t tri = blk.prim[k % W];
+      // Small leaves (8-wide layout, <= 4 triangles) live in one 4-wide block.
+      const bool small = cnt <= m.small_leaf;
+      const uint32_t bw = small ? 4 : W, nb = (cnt + bw - 1) / bw;
+      ASSERT_LE(size_t(first) + nb, small ? m.small.size() : m.blocks.size());
+      auto lane = [&](uint32_t k, int c) -> std::pair<uint32_t, Vec3> {
+        const uint32_t l = k % bw;
+        if (small) {
+          const TriBlock<4>& blk = m.small[first];
+          return {blk.prim[l], {blk.v[c][0][l], blk.v[c][1][l], blk.v[c][2][l]}};
+        }
+        const TriBlock<W>& blk = m.blocks[first + k / bw];
+        return {blk.prim[l], {blk.v[c][0][l], blk.v[c][1][l], blk.v[c][2][l]}};
+      };
+      for (uint32_t k = 0; k < nb * bw; ++k) {
+        const uint32_t tri = lane(k, 0).first;
         ASSERT_LT(tri, s.num_triangles());
-        if (k < cnt) seen[tri]++;
-        else EXPECT_EQ(tri, m.blocks[first + (cnt - 1) / W].prim[(cnt - 1) % W]) << "padding is the last triangle";
+        if (k < cnt) {
+          seen[tri]++;
+        } else {
+          EXPECT_EQ(tri, lane(cnt - 1, 0).first) << "padding is the last triangle";
+        }
         EXPECT_TRUE(b.contains(s.triangle_bounds(tri))) << "triangle " << tri << " outside its leaf";
-        for (int c = 0; c < 3; ++c)
-          EXPECT_EQ(Vec3(blk.v[c][0][k % W], blk.v[c][1][k % W], blk.v[c][2][k % W]), s.vertex(tri, c));
+        for (int c = 0; c < 3; ++c) EXPECT_EQ(lane(k, c).second, s.vertex(tri, c));
       }
     }
   }
@@ -110,6 +129,12 @@ void check_scene(const Scene& s, int leaf, int merge) {
   check_invariants(s, o, q);
   EXPECT_LE(o.stats.sah_cost, m.stats.sah_cost * (1 + 1e-5));
   EXPECT_GE(o.stats.avg_children, m.stats.avg_children * 0.95);
+  if (W == 8) {  // without small 4-wide leaf blocks
+    q.small = 0;
+    const MBVH<N, W> z = MBVH<N, W>::collapse(s, bvh, q);
+    EXPECT_TRUE(z.small.empty());
+    check_invariants(s, z, q);
+  }
 }
 
 TEST(MBVH, CollapseInvariants) {
@@ -376,7 +401,8 @@ TEST(MBVH, StreamSizesMatchReference) {
 
 TEST(MBVH, ParametersAreValidated) {
   for (const auto& [k, v] : std::vector<std::pair<std::string, std::string>>{
-           {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"}}) {
+           {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"},
+           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}}) {
     SchemeConfig cfg;
     cfg.params[k] = v;
     const char* scheme = k == "stream" ? "mbvh_rs" : k == "tri_width" ? "mbvh8_single" : "mbvh4_single";

@@ -100,7 +100,6 @@ class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
     using S4 = mbvh_simd::V<4>;
     const MBVH<4, 4>& m = *data_.mbvh;
     const MBVHNode<4>* nodes = m.nodes.data();
-    const TriBlock<4>* blocks = m.blocks.data();
     const uint32_t n = last - first;
     if constexpr (P::enabled)
       if (probe.counts) probe.counts->rays += n;
@@ -162,17 +161,17 @@ class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
           continue;
         }
         if (mbvh_ref::is_leaf(t.ref)) {
-          probe_leaf<4>(blocks, t.ref, probe, t.count);
+          probe_leaf(m, t.ref, probe, t.count);
           for (uint32_t i = 0; i < t.count; ++i) {
             probe.read(&list[i], sizeof(uint16_t));
             const uint32_t id = list[i];
             const StreamRay& r = s.rays[id];
             probe.read(&r, sizeof(StreamRay));
             if constexpr (K == TriKernel::watertight) {
-              leaf_test<4, K>(blocks, nullptr, tri_ray(r), nullptr, t.ref, s.hits[id]);
+              leaf_test<4, 4, K>(m, nullptr, tri_ray(r), nullptr, t.ref, s.hits[id]);
             } else {
               const RayCtx rc(batch.rays[first + id]);
-              leaf_test<4, K>(blocks, data_.tris.get(), tri_ray(r), &rc, t.ref, s.hits[id]);
+              leaf_test<4, 4, K>(m, data_.tris.get(), tri_ray(r), &rc, t.ref, s.hits[id]);
             }
           }
           continue;

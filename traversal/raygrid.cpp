@@ -253,12 +253,15 @@ class RayGrid final : public TraverserBase<RayGrid> {
  public:
   explicit RayGrid(const SchemeConfig& cfg) : cfg_(cfg) {
     m_ = cfg.get_int("queue", 384);
+    const int feed = cfg.get_int("feed", int(kMaxChunk));
     params_.leaf_prims = cfg.get_int("leaf_prims", params_.leaf_prims);
     params_.max_depth = cfg.get_int("max_depth", params_.max_depth);
     params_.mbvh_leaf = cfg.get_int("leaf_size", params_.mbvh_leaf);
     params_.merge = cfg.get_int("merge", params_.merge);
     params_.bins = cfg.get_int("bins", params_.bins);
     if (m_ < 1 || m_ > 65535) throw InputError("parameter queue must be in [1, 65535]");
+    if (feed < 1) throw InputError("parameter feed must be >= 1");
+    feed_ = uint32_t(feed);
     if (params_.leaf_prims < 1) throw InputError("parameter leaf_prims must be >= 1");
     if (params_.max_depth < 0 || params_.max_depth > 20) throw InputError("parameter max_depth must be in [0, 20]");
     if (params_.mbvh_leaf < 1 || params_.mbvh_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");
@@ -387,12 +390,12 @@ class RayGrid final : public TraverserBase<RayGrid> {
   // Octree walk (§5.3.2 "Octree", Fig. 31)
 
   // Whether a ray in leaf node `node` has anything to intersect there: the leaf has triangles
-  // and the ray reaches their (clipped) bounds before its closest hit so far.
+  // and, where their (clipped) bounds leave much of the leaf empty, the ray reaches those bounds
+  // before its closest hit so far. (Testing leaves that are full of geometry costs more than the
+  // rare queue round trip it saves.)
   bool worth(const WalkRay& w, uint32_t node) const {
     const OctreeLeaf& lf = oct_->leaves[oct_->nodes[node].leaf];
-    static const int nocull = getenv("NOCULL") ? atoi(getenv("NOCULL")) : 0;
-    if (nocull == 2) return !lf.empty() && (!lf.cull_tight || walk_entry(w, lf.cull) != INFINITY);
-    return !lf.empty() && (nocull || walk_entry(w, lf.cull) != INFINITY);
+    return !lf.empty() && (!lf.cull_tight || walk_entry(w, lf.cull) != INFINITY);
   }
 
   // Exit distance and axis of a ray leaving leaf node `nd`: the nearest far slab plane among the
@@ -618,7 +621,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
         continue;
       }
       if (mbvh_ref::is_leaf(t.ref)) {
-        probe_leaf<4>(blocks, t.ref, probe, t.count);
+        probe_leaf(m, t.ref, probe, t.count);
         uint32_t i = 0;
         if constexpr (K == TriKernel::watertight) {
           const uint32_t first = mbvh_ref::first_block(t.ref), nblocks = (mbvh_ref::num_tris(t.ref) + 3) / 4;
@@ -636,10 +639,10 @@ class RayGrid final : public TraverserBase<RayGrid> {
           const uint32_t id = list[i];
           probe_ray(v, id, probe);
           if constexpr (K == TriKernel::watertight) {
-            leaf_test<4, K>(blocks, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
+            leaf_test<4, 4, K>(m, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
           } else {
             const RayCtx rc = ray_ctx(v, id);
-            leaf_test<4, K>(blocks, tris_.get(), tri_ray(v, id), &rc, t.ref, v.hits[id]);
+            leaf_test<4, 4, K>(m, tris_.get(), tri_ray(v, id), &rc, t.ref, v.hits[id]);
           }
         }
         continue;
@@ -767,49 +770,65 @@ class RayGrid final : public TraverserBase<RayGrid> {
     if constexpr (P::enabled)
       if (probe.counts) probe.counts->rays += n;
 
-    uint64_t T0 = __rdtsc();
-    // Feed: every ray into the queue of the leaf that holds its origin or scene entry point.
+    // Feed: rays go into the queue of the leaf that holds their origin or scene entry point. They
+    // are fed in slices, each only when no full queue is waiting (the second strategy of §5.3.4:
+    // "feeding new rays only when no full ray queues are available, memory requirements stay
+    // low"): the queues then stay in cache instead of spreading all N records over memory first.
     const OctreeNode& root = oct.nodes[0];
     const AABB root_box{root.lo, root.hi};
     uint32_t last_node = kNone;
-    for (uint32_t i = first; i < last; ++i) {
-      const Ray& ray = batch.rays[i];
-      probe.read(&ray, sizeof(Ray));
-      out[i] = Hit{};
-      probe.write(&out[i], sizeof(Hit));
-      if (!(ray.tmin < ray.tmax)) continue;  // the empty interval [t, t): nothing to find
-      WalkRay w{ray.org, ray.dir, {1.f / ray.dir.x, 1.f / ray.dir.y, 1.f / ray.dir.z}, ray.tmin, ray.tmax};
-      const float t0 = walk_entry(w, root_box);
-      if (t0 == INFINITY) {
-        c.outside++;
-        continue;
-      }
-      Vec3 p;
-      for (int a = 0; a < 3; ++a) p[a] = std::clamp(w.org[a] + w.dir[a] * t0, root.lo[a], root.hi[a]);
-      // Neighbouring pixels' rays usually start in the same leaf: a point strictly inside the
-      // previous ray's leaf is in no other.
-      uint32_t node;
-      if (last_node != kNone && oct.strictly_inside(last_node, p))
-        node = last_node;
-      else
-        node = last_node = oct.locate(0, p, w.dir);
-      if (!worth(w, node)) {
-        c.skipped++;
-        node = advance(w, node, c, probe);
+    auto feed = [&](uint32_t lo, uint32_t hi) {
+      uint64_t T0 = __rdtsc();
+      for (uint32_t i = lo; i < hi; ++i) {
+        const Ray& ray = batch.rays[i];
+        probe.read(&ray, sizeof(Ray));
+        out[i] = Hit{};
+        probe.write(&out[i], sizeof(Hit));
+        if (!(ray.tmin < ray.tmax)) continue;  // the empty interval [t, t): nothing to find
+        WalkRay w{ray.org, ray.dir, {}, ray.tmin, ray.tmax};
+        uint32_t node;
+        if (ray.tmin == 0.f && oct.strictly_inside(0, ray.org)) {
+          // The common case (bounce and shadow rays): the origin's leaf. It holds the surface the
+          // ray starts from, so it is worth queueing in without a test.
+          node = last_node != kNone && oct.strictly_inside(last_node, ray.org) ? last_node
+                                                                              : (last_node = oct.locate(0, ray.org, ray.dir));
+          if (oct.leaves[oct.nodes[node].leaf].empty()) {
+            w.inv = {1.f / ray.dir.x, 1.f / ray.dir.y, 1.f / ray.dir.z};
+            c.skipped++;
+            node = advance(w, node, c, probe);
+          }
+        } else {
+          // From outside the scene bounds (or from tmin on): start at the entry point.
+          w.inv = {1.f / ray.dir.x, 1.f / ray.dir.y, 1.f / ray.dir.z};
+          const float t0 = walk_entry(w, root_box);
+          if (t0 == INFINITY) {
+            c.outside++;
+            continue;
+          }
+          Vec3 p;
+          for (int a = 0; a < 3; ++a) p[a] = std::clamp(w.org[a] + w.dir[a] * t0, root.lo[a], root.hi[a]);
+          node = oct.locate(0, p, w.dir);
+          if (!worth(w, node)) {
+            c.skipped++;
+            node = advance(w, node, c, probe);
+          }
+        }
         if (node == kNone) continue;
         if (node == kFallback) {
           c.fallbacks++;
           full_traversal<K>(s, w, out[i], probe);
           continue;
         }
+        push(s, oct.nodes[node].leaf, w, i - first, c, probe);
       }
-      push(s, oct.nodes[node].leaf, w, i - first, c, probe);
-    }
+      g_prof[0] += __rdtsc() - T0;
+    };
 
-    g_prof[0] += __rdtsc() - T0;
-    // Process full queues first, then partial ones, until no ray is active.
+    // Process full queues first — a leaf's full queues back to back — then partial ones, until
+    // no ray is active.
     float* d = s.derived.data();
     uint32_t cur = kNone;  // the leaf whose full queues are being processed
+    uint32_t next_ray = first;
     for (;;) {
       uint32_t q = kNone;
       if (cur == kNone || s.leaf_full[cur] == kNone) {
@@ -828,6 +847,11 @@ class RayGrid final : public TraverserBase<RayGrid> {
         q = s.leaf_full[cur];
         s.leaf_full[cur] = s.next[q];
         c.full++;
+      } else if (next_ray < last) {
+        const uint32_t hi = last - next_ray > feed_ ? next_ray + feed_ : last;
+        feed(next_ray, hi);
+        next_ray = hi;
+        continue;
       } else if (s.partial_head != kNone) {
         q = s.partial_head;
         unlink_partial(s, q);
@@ -896,6 +920,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
   SchemeConfig cfg_;
   OctreeParams params_;
   int m_ = 384;
+  uint32_t feed_ = kMaxChunk;  // rays fed per slice (default: all of them before processing, Alg. 5.1)
   uint32_t depth_ = 1;
   std::shared_ptr<const Octree> oct_;
   std::shared_ptr<const TriangleSet> tris_;
