@@ -1,6 +1,6 @@
 // raygrid: data-parallel ray tracing with ray queues in the leaves of a shallow octree (thesis
 // §5.3, Algorithm 5.1; after Pharr et al.'s Toro scheduling grid, targeted at the top of the
-// memory hierarchy instead of disk I/O).
+// memory hierarchy instead of disk I/O). Structure: structures/octree.h.
 //
 // Every ray is added to the queue of the octree leaf that contains its origin (or, for a ray
 // from outside, its entry point into the scene bounds). A queue holds M rays by value in SoA
@@ -9,21 +9,29 @@
 // the index. Queues sit on three lists (§5.3.2 "Ray Queues"): empty queues, partially filled ones
 // (each leaf owns at most one) and full ones. Full queues are processed first — processing one
 // can fill the queues of neighbouring leaves — then partial ones, until no ray is active
-// (§5.3.3). Processing a queue (Alg. 5.1 `process`) is
-//   1. the rays, converted to AoS, traverse the leaf's mini-MBVH as one MBVH/RS stream (Tsakok
-//      2009, thesis Alg. 2.9: task stack, one active-ray stack per SIMD lane, children ordered by
-//      summed entry distance, one-ray streams finishing with ordinary single-ray traversal);
-//   2. each ray whose closest hit so far lies inside the leaf (t <= the leaf's exit distance) is
-//      finished; the others leave through the exit face's neighbour link and descend to the leaf
-//      containing the exit point (§5.3.2 "Octree"), where they are queued again.
+// (§5.3.3). Processing a queue (Alg. 5.1 `process`):
+//   1. the per-ray constants of the node and triangle tests are computed for the whole queue,
+//      eight rays per AVX2 instruction straight from the SoA record (the thesis' reason for SoA:
+//      "intersect the rays with the boundary planes of an octree node using SIMD code");
+//   2. the rays traverse the leaf's mini-MBVH as one MBVH/RS stream (Tsakok 2009, thesis Alg.
+//      2.9: task stack, one active-ray stack per SIMD lane, children ordered by summed entry
+//      distance, one-ray streams finishing with ordinary single-ray traversal); a leaf's rays are
+//      tested two per AVX2 pass (pair_intersect);
+//   3. hits found go to the output; the exit distance and face of every ray are computed in SIMD;
+//      a ray whose closest hit so far lies inside the leaf (t <= exit distance) is finished, the
+//      others leave through the exit face's neighbour link and descend to the leaf containing
+//      the exit point (§5.3.2 "Octree"), where they are queued again.
 // A triangle that spans several leaves may be hit beyond the current leaf: that hit is kept as
 // the ray's best so far but does not finish it, since a later leaf may hold a closer one.
 //
-// Two refinements that do not change results: a ray crosses leaves without geometry, and
-// leaves whose geometry bounds it cannot reach before its closest hit, on the spot instead of
-// being queued there (the octree walk costs less than a queue round trip); and a processed
-// queue goes back to the empty list as soon as its rays are copied out, so the next queue
-// filled is the one just read (still in L1).
+// Refinements that do not change results:
+// - a ray crosses leaves without triangles on the spot instead of being queued there, and
+//   leaves whose clipped geometry leaves much of them empty only when it reaches that geometry
+//   before its closest hit (the octree walk costs far less than a queue round trip);
+// - a leaf's full queues are processed back to back while its mini-MBVH is in cache;
+// - `feed` (default: all rays first, as Alg. 5.1) feeds rays in slices, each only when no full
+//   queue is waiting — the thesis' low-memory alternative (§5.3.4), slower here: fewer rays in
+//   flight means fuller partial queues are rarer.
 //
 // Robustness (watertight like every scheme of the suite): the walk position is computed in
 // float, and leaves reference every triangle within Octree::pad of their box (structures/
@@ -31,11 +39,12 @@
 // edges and corners go through one face and continue from the neighbour at the same distance;
 // axis-parallel rays never exit through faces they run along, and a ray on a shared face picks
 // the side its direction points to. A ray that has been queued kMaxSteps times (a walk that does
-// not advance — never seen) is finished by a full traversal of every leaf's mini-MBVH and
-// counted in RayGridStats::fallbacks.
+// not advance — never seen) or whose walk through empty leaves exceeds the number of leaves is
+// finished by a full traversal of every leaf's mini-MBVH and counted in RayGridStats::fallbacks.
 //
-// Parameters: queue (M, default 384, §5.3.5), leaf_prims (default 4096), max_depth (default 10),
-// leaf_size / merge / bins of the mini-MBVHs (4 / 4 / 16, as mbvh4_single).
+// Parameters: queue (M, default 384, §5.3.5), leaf_prims (default 4096, §5.4.1), max_depth
+// (default 10), feed (rays per slice), leaf_size / merge / bins of the mini-MBVHs (4 / 4 / 16,
+// as mbvh4_single).
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -45,9 +54,8 @@
 #include "structures/octree.h"
 #include "traversal/raygrid_stats.h"
 
-#include <x86intrin.h>
 namespace tb {
-uint64_t g_prof[8];
+
 std::string RayGridStats::describe() const {
   char buf[400];
   std::snprintf(buf, sizeof buf,
@@ -416,15 +424,23 @@ class RayGrid final : public TraverserBase<RayGrid> {
   // Crosses the exit face (axis, at t_exit) of leaf node `node`: the face's neighbour link, then
   // the descent to the leaf containing the exit point, clamped to the face so that the next leaf
   // always shares part of it. kNone at the scene boundary.
-  uint32_t cross(const WalkRay& w, uint32_t node, int axis, float t_exit) const {
+  template <class P>
+  uint32_t cross(const WalkRay& w, uint32_t node, int axis, float t_exit, P& probe) const {
     const OctreeNode& nd = oct_->nodes[node];
+    probe.read(&nd, sizeof(OctreeNode));
     const int side = std::signbit(w.inv[axis]) ? 0 : 1;
     const uint32_t nb = nd.nbr[face_of(axis, side)];
     if (nb == kNoNode) return kNone;
     Vec3 p;
     for (int b = 0; b < 3; ++b)
       p[b] = b == axis ? (side ? nd.hi[b] : nd.lo[b]) : std::clamp(w.org[b] + w.dir[b] * t_exit, nd.lo[b], nd.hi[b]);
-    return oct_->locate(nb, p, w.dir);
+    const uint32_t next = oct_->locate(nb, p, w.dir);
+    if constexpr (P::enabled) {
+      probe.read(&oct_->nodes[nb], sizeof(OctreeNode));
+      if (next != nb) probe.read(&oct_->nodes[next], sizeof(OctreeNode));
+      probe.read(&oct_->leaves[oct_->nodes[next].leaf], sizeof(OctreeLeaf));
+    }
+    return next;
   }
 
   // From leaf node `node` to the next leaf worth queueing the ray in, crossing leaves with
@@ -440,7 +456,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       int axis;
       const float t_exit = exit_of(nd, w, axis);
       if (axis < 0 || w.tbest <= t_exit) return kNone;
-      node = cross(w, node, axis, t_exit);
+      node = cross(w, node, axis, t_exit, probe);
       if (node == kNone) return kNone;
       if (worth(w, node)) return node;
       c.skipped++;
@@ -770,15 +786,14 @@ class RayGrid final : public TraverserBase<RayGrid> {
     if constexpr (P::enabled)
       if (probe.counts) probe.counts->rays += n;
 
-    // Feed: rays go into the queue of the leaf that holds their origin or scene entry point. They
-    // are fed in slices, each only when no full queue is waiting (the second strategy of §5.3.4:
-    // "feeding new rays only when no full ray queues are available, memory requirements stay
-    // low"): the queues then stay in cache instead of spreading all N records over memory first.
+    // Feed: rays go into the queue of the leaf that holds their origin or scene entry point. By
+    // default all of them before any queue is processed (Alg. 5.1); with `feed` in slices, each
+    // only when no full queue is waiting (the second strategy of §5.3.4: "feeding new rays only
+    // when no full ray queues are available, memory requirements stay low").
     const OctreeNode& root = oct.nodes[0];
     const AABB root_box{root.lo, root.hi};
     uint32_t last_node = kNone;
     auto feed = [&](uint32_t lo, uint32_t hi) {
-      uint64_t T0 = __rdtsc();
       for (uint32_t i = lo; i < hi; ++i) {
         const Ray& ray = batch.rays[i];
         probe.read(&ray, sizeof(Ray));
@@ -821,7 +836,6 @@ class RayGrid final : public TraverserBase<RayGrid> {
         }
         push(s, oct.nodes[node].leaf, w, i - first, c, probe);
       }
-      g_prof[0] += __rdtsc() - T0;
     };
 
     // Process full queues first — a leaf's full queues back to back — then partial ones, until
@@ -873,13 +887,10 @@ class RayGrid final : public TraverserBase<RayGrid> {
       if constexpr (P::enabled)
         for (uint32_t k = 0; k < cnt; ++k)
           for (uint32_t f = 0; f < kFields; ++f) probe.read(&b[f * mp + k], 4);
-      uint64_t T1 = __rdtsc();
       prepare_stream(v, cnt);
       for (uint32_t k = 0; k < cnt; ++k) v.hits[k] = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
 
-      uint64_t T2 = __rdtsc(); g_prof[1] += T2 - T1;
       stream<K>(s, v, cnt, lf.mbvh_root, probe);
-      uint64_t T3 = __rdtsc(); g_prof[2] += T3 - T2;
 
       // Finish or move on (Alg. 5.1, second half of `process`): the hits found here go to the
       // output (a ray's best hit only ever improves), the exits of the whole queue are computed
@@ -898,7 +909,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
         const uint32_t rec = v.rec[k];
         const WalkRay w{{v.ox[k], v.oy[k], v.oz[k]}, {v.dx[k], v.dy[k], v.dz[k]}, {v.ix[k], v.iy[k], v.iz[k]},
                         v.tmin[k], v.hits[k].t};
-        uint32_t next = cross(w, lf.node, int(v.axis[k]), v.texit[k]);
+        uint32_t next = cross(w, lf.node, int(v.axis[k]), v.texit[k], probe);
         if (next == kNone) continue;  // left the scene
         if (!worth(w, next)) {
           c.skipped++;
@@ -913,7 +924,6 @@ class RayGrid final : public TraverserBase<RayGrid> {
         push(s, oct.nodes[next].leaf, w, rec + (1u << kIdBits), c, probe);
       }
       s.empty.push_back(q);
-      g_prof[3] += __rdtsc() - T3;
     }
   }
 
