@@ -20,6 +20,9 @@ SECONDS_EACH=${1:-60}
 TARGETS=("$@")
 [ ${#TARGETS[@]} -eq 0 ] && TARGETS=(mesh gltf rays din)
 JOBS=${FUZZ_JOBS:-$(nproc)}
+for t in "${TARGETS[@]}"; do
+  [ -f "tests/fuzz/fuzz_$t.cpp" ] || { echo "fuzz: unknown target '$t' (mesh, gltf, rays, din)" >&2; exit 2; }
+done
 
 if ! command -v clang++ >/dev/null || ! ls /usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.fuzzer-x86_64.a >/dev/null 2>&1; then
   echo "fuzz: installing clang and its runtime libraries (libFuzzer)" >&2
@@ -58,7 +61,6 @@ status=0
 pids=()
 names=()
 for t in "${TARGETS[@]}"; do
-  [ -f "tests/fuzz/fuzz_$t.cpp" ] || { echo "fuzz: unknown target '$t' (mesh, gltf, rays, din)" >&2; exit 2; }
   while [ "$(jobs -rp | wc -l)" -ge "$JOBS" ]; do sleep 1; done
   echo "fuzz: $t for ${SECONDS_EACH}s (log: build-fuzz/logs/$t.log)" >&2
   run_one "$t" &
