@@ -3,7 +3,10 @@
 
 Usage: /usr/bin/python3 scripts/goals.py run1.csv [run2.csv ...]
 Each CSV should come from one `travbench run` (same run = comparable timings) with at least the
-workloads primary, bounce:2 and bounce:3; a CSV with --threads 2 rows adds the scaling line.
+workloads primary, bounce:2 and bounce:3. Rows are grouped by scene across all files; when a scene
+has rows for more than one --threads value (e.g. a second run with --threads 2), the thread-scaling
+lines compare each scheme's fewest- and most-thread rows. A `travbench table build` CSV adds the
+build goal (bvh_single's structure vs Embree's medium-quality build, 1 thread).
 """
 import csv
 import sys
@@ -24,12 +27,20 @@ def ratio(a, b):
 
 
 def main(paths):
+    scenes = defaultdict(lambda: defaultdict(dict))  # scene -> threads -> (workload, scheme) -> Mrays/s
+    sources = defaultdict(list)
+    builds = []
     for path in paths:
-        rows = list(csv.DictReader(open(path)))
-        by_threads = defaultdict(dict)
-        for r in rows:
-            by_threads[int(r["threads"])][(r["workload"], r["scheme"])] = float(r["mrays_median"])
-        scene = rows[0]["scene"] if rows else path
+        with open(path, newline="") as f:
+            for r in csv.DictReader(f):
+                if "structure" in r:
+                    builds.append(r)
+                    continue
+                scenes[r["scene"]][int(r["threads"])][(r["workload"], r["scheme"])] = float(r["mrays_median"])
+                if path not in sources[r["scene"]]:
+                    sources[r["scene"]].append(path)
+    for scene, by_threads in scenes.items():
+        path = ", ".join(sources[scene])
         c = by_threads[min(by_threads)] if by_threads else {}
         print(f"== {scene} ({path})")
         s2, s2n = best(c, SINGLE, "bounce:2")
@@ -51,6 +62,13 @@ def main(paths):
                 if key in by_threads[hi]:
                     print(f"  scaling {key[1]:<16} {key[0]:<10} {hi} vs {lo} threads: "
                           f"{ratio(by_threads[hi][key], by_threads[lo][key])}   goal >= 1.8x")
+
+
+    for scene in dict.fromkeys(r["scene"] for r in builds):
+        ms = {r["structure"]: float(r["build_ms"]) for r in builds if r["scene"] == scene and r["threads"] == "1"}
+        if "bvh_single" in ms and "embree medium" in ms:
+            print(f"== {scene} build: bvh_single {ms['bvh_single']:.1f} ms, embree medium {ms['embree medium']:.1f} ms:"
+                  f" Embree / ours = {ms['embree medium'] / ms['bvh_single']:.2f}x   goal >= 1.0x")
 
 
 if __name__ == "__main__":

@@ -1,20 +1,40 @@
 #!/usr/bin/env bash
 # The main job: set-up + build + the default suite on a scene, CSV + PNG under results/<scene>/.
-#   scripts/run.sh [--quick] [SCENE ...]
-# SCENE: a built-in name (default: room) or a scene file path (e.g. ../shared/scenes/sponza.obj).
-# The default suite takes ~10 minutes on 2 cores; --quick takes ~1 minute (small images, 1 rep).
+#   scripts/run.sh [--quick] [--scaling] [--steps LIST] [SCENE|FOLDER ...]
+# SCENE: a built-in name (default: room) or a scene file path (e.g. ../shared/scenes/sponza.obj);
+# FOLDER: every scene file in it (e.g. ../shared/scenes).
+# The default suite takes ~10 minutes per scene on 2 cores; --quick takes ~1 minute (small images,
+# 1 rep). --steps picks a subset of run,divergence,bounce,raygrid,cache,accuracy,build (default:
+# all). --scaling adds the scaling table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory)
+# under results/spheres/. Ends with the performance-goal ratios of each scene (scripts/goals.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=0
+scaling=0
+want=run,divergence,bounce,raygrid,cache,accuracy,build
 scenes=()
-for a in "$@"; do
-  case "$a" in
+while [ $# -gt 0 ]; do
+  case "$1" in
     --quick) quick=1 ;;
-    -h|--help) sed -n 2,5p "$0"; exit 0 ;;
-    *) scenes+=("$a") ;;
+    --scaling) scaling=1 ;;
+    --steps) want=${2:?--steps needs a list}; shift ;;
+    -h|--help) sed -n 2,9p "$0"; exit 0 ;;
+    -*) echo "run.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
+    *)
+      if [ -d "$1" ]; then
+        found=$(find "$1" -maxdepth 1 -type f \( -iname '*.obj' -o -iname '*.ply' -o -iname '*.off' -o -iname '*.stl' \
+                -o -iname '*.gltf' -o -iname '*.glb' \) | sort)
+        [ -n "$found" ] || { echo "run.sh: no scene files in folder '$1'" >&2; exit 2; }
+        while IFS= read -r f; do scenes+=("$f"); done <<<"$found"
+      elif [[ "$1" == */* ]] && [ ! -f "${1%@*}" ]; then
+        echo "run.sh: scene file '$1' not found" >&2; exit 2
+      else
+        scenes+=("$1")
+      fi ;;
   esac
+  shift
 done
-[ ${#scenes[@]} -eq 0 ] && scenes=(room)
+[ ${#scenes[@]} -eq 0 ] && [ $scaling -eq 0 ] && scenes=(room)
 scripts/setup.sh
 scripts/build.sh >/dev/null
 TB=build/travbench
@@ -24,20 +44,24 @@ else
   big=(--width 512 --height 512 --reps 5); small=(--width 256 --height 256 --reps 3)
 fi
 tables=$($TB list tables)
-has() { grep -qx "$1" <<<"$tables"; }
+has() { grep -qx "$1" <<<"$tables" && grep -qw "$1" <<<"${want//,/ }"; }
 
 steps=()
 for scene in "${scenes[@]}"; do
   name=$(basename "$scene"); name=${name%.*}; out=results/$name
-  steps+=("$TB run --scene $scene --schemes all --workloads primary,divergence:8,rnd,rnd2,bounce:1,bounce:2,shadow --stats ${big[*]} --csv $out/run.csv")
+  if grep -qw run <<<"${want//,/ }"; then
+    steps+=("$TB run --scene $scene --schemes all --workloads primary,divergence:8,rnd,rnd2,bounce:1,bounce:2,bounce:3,shadow --stats ${big[*]} --csv $out/run.csv")
+  fi
   has divergence && steps+=("$TB table divergence --scene $scene ${small[*]} --csv $out/divergence.csv")
   has bounce && steps+=("$TB table bounce --scene $scene ${big[*]} --csv $out/bounce.csv")
   has raygrid && steps+=("$TB table raygrid --scene $scene ${big[*]} --csv $out/raygrid.csv")
   has cache && steps+=("$TB table cache --scene $scene --reps 1 --csv $out/cache.csv")
   has accuracy && steps+=("$TB table accuracy --scene $scene ${small[*]} --csv $out/accuracy.csv")
   has build && steps+=("$TB table build --scene $scene --reps 3 --csv $out/build.csv")
-  mkdir -p "$out"
 done
+if [ $scaling -eq 1 ]; then
+  steps+=("$TB table scaling ${small[*]} --csv results/spheres/scaling.csv")
+fi
 
 # One line of progress per step on stderr; each step's own output goes to its log beside the CSV.
 total=${#steps[@]}
@@ -48,14 +72,24 @@ for step in "${steps[@]}"; do
   csv=${step##* }
   bar=$(printf '%*s' $((i * 30 / total)) '' | tr ' ' '#')
   printf '[%-30s] %d/%d %s (%ds)\n' "$bar" "$i" "$total" "${csv}" $(( $(date +%s) - start )) >&2
-  $step >"${csv%.csv}.log" 2>&1 || { echo "step failed: $step (see ${csv%.csv}.log)" >&2; exit 1; }
-done
-for scene in "${scenes[@]}"; do
-  name=$(basename "$scene"); name=${name%.*}
-  if /usr/bin/python3 -c "import matplotlib" 2>/dev/null; then
-    /usr/bin/python3 scripts/plot.py "results/$name" >&2
-  else
-    echo "matplotlib (python3-matplotlib) missing: CSVs are in results/$name, no plots" >&2
+  mkdir -p "$(dirname "$csv")"
+  if ! $step >"${csv%.csv}.log" 2>&1; then
+    echo "step failed: $step" >&2
+    tail -3 "${csv%.csv}.log" >&2
+    exit 1
   fi
 done
-echo "done in $(( $(date +%s) - start )) s: ${scenes[*]} -> results/" >&2
+folders=()
+for scene in "${scenes[@]}"; do name=$(basename "$scene"); folders+=("results/${name%.*}"); done
+[ $scaling -eq 1 ] && folders+=(results/spheres)
+if /usr/bin/python3 -c "import matplotlib" 2>/dev/null; then
+  /usr/bin/python3 scripts/plot.py "${folders[@]}" >&2
+else
+  echo "matplotlib (python3-matplotlib) missing: CSVs are in ${folders[*]}, no plots" >&2
+fi
+for f in "${folders[@]}"; do
+  csvs=()
+  for c in "$f/run.csv" "$f/build.csv"; do if [ -f "$c" ]; then csvs+=("$c"); fi; done
+  if [ ${#csvs[@]} -gt 0 ]; then /usr/bin/python3 scripts/goals.py "${csvs[@]}"; fi
+done
+echo "done in $(( $(date +%s) - start )) s: ${folders[*]}" >&2

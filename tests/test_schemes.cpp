@@ -33,6 +33,23 @@ TEST_P(SchemeAccuracy, MatchesReferenceOnOrdinaryWorkloads) {
   }
 }
 
+// The scaling and build tables report each scheme's memory: every scheme (baselines included,
+// through Embree's memory monitor) must report at least its triangle references and no absurd
+// amount; schemes sharing one structure report the same bytes.
+TEST_P(SchemeAccuracy, ReportsItsStructureMemory) {
+  Bench& bench = bench_for("room");
+  auto t = make_scheme(GetParam());
+  t->prepare(bench.scene(), bench.cache());
+  const size_t tris = bench.scene().num_triangles();
+  EXPECT_GE(t->structure_bytes(), tris * 12) << GetParam();
+  EXPECT_LE(t->structure_bytes(), tris * 1024) << GetParam();
+  if (GetParam() == "bvh_masked" || GetParam() == "bvh_ranged" || GetParam() == "bvh_partition") {
+    auto single = make_scheme("bvh_single");
+    single->prepare(bench.scene(), bench.cache());
+    EXPECT_EQ(t->structure_bytes(), single->structure_bytes()) << GetParam();
+  }
+}
+
 // Our schemes with their default kernels: not one leak on the must-hit workloads, also with the
 // geometry translated to ~1e5 and ~1e6. (Embree is a baseline: its leak rate is reported by
 // `travbench table accuracy`; Embree 3.13 in robust mode still leaks at exact vertex hits.)

@@ -10,6 +10,8 @@ namespace tb {
 struct BVHData {
   std::shared_ptr<const BVH> bvh;
   std::shared_ptr<const TriangleSet> tris;
+  // Bytes of the nodes plus the leaf-ordered triangles (what a traversal reads).
+  size_t bytes() const { return bvh->stats.bytes + tris->size() * (sizeof(TriVerts) + sizeof(uint32_t)); }
 };
 
 // BVH build parameters from a scheme's config: `bins`, `leaf_size`.

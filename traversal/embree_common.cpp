@@ -1,5 +1,7 @@
 #include "traversal/embree_common.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cstdio>
 #include <stdexcept>
 
@@ -9,6 +11,15 @@ namespace {
 void on_error(void*, RTCError code, const char* msg) {
   std::fprintf(stderr, "travbench: embree error %d: %s\n", int(code), msg ? msg : "");
 }
+
+// Net bytes Embree's device holds. Embree 3 has no per-scene memory query; its memory monitor
+// callback sees every allocation and free of the device, so a scene's footprint is the growth of
+// this counter across its construction (vertex/index buffers + BVH). Builds run one at a time.
+std::atomic<int64_t> g_device_bytes{0};
+bool on_memory(void*, ssize_t bytes, bool) {
+  g_device_bytes.fetch_add(bytes, std::memory_order_relaxed);
+  return true;
+}
 }  // namespace
 
 RTCDevice embree_device() {
@@ -16,6 +27,7 @@ RTCDevice embree_device() {
     RTCDevice d = rtcNewDevice("threads=1,set_affinity=0");
     if (!d) throw std::runtime_error("embree: rtcNewDevice failed");
     rtcSetDeviceErrorFunction(d, on_error, nullptr);
+    rtcSetDeviceMemoryMonitorFunction(d, on_memory, nullptr);
     return d;
   }();
   return device;
@@ -23,6 +35,7 @@ RTCDevice embree_device() {
 
 EmbreeScene::EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust) {
   RTCDevice dev = embree_device();
+  const int64_t before = g_device_bytes.load();
   scene_ = rtcNewScene(dev);
   rtcSetSceneFlags(scene_, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
   const RTCBuildQuality q = quality == EmbreeQuality::high     ? RTC_BUILD_QUALITY_HIGH
@@ -47,6 +60,7 @@ EmbreeScene::EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust)
   rtcAttachGeometry(scene_, geom);
   rtcReleaseGeometry(geom);
   rtcCommitScene(scene_);
+  bytes_ = size_t(std::max<int64_t>(0, g_device_bytes.load() - before));
 }
 
 EmbreeScene::~EmbreeScene() {

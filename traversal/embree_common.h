@@ -17,13 +17,16 @@ enum class EmbreeQuality { low, medium, high };
 class EmbreeScene {
  public:
   EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust);
-  EmbreeScene(EmbreeScene&& o) noexcept : scene_(o.scene_) { o.scene_ = nullptr; }
+  EmbreeScene(EmbreeScene&& o) noexcept : scene_(o.scene_), bytes_(o.bytes_) { o.scene_ = nullptr; }
   EmbreeScene(const EmbreeScene&) = delete;
   ~EmbreeScene();
   RTCScene get() const { return scene_; }
+  // Device memory the scene added (buffers + BVH), from Embree's memory monitor.
+  size_t bytes() const { return bytes_; }
 
  private:
   RTCScene scene_ = nullptr;
+  size_t bytes_ = 0;
 };
 
 RTCDevice embree_device();
@@ -52,6 +55,7 @@ class EmbreeTraverserBase {
   void prepare_embree(const Scene& scene, StructureCache& cache) {
     scene_ = fetch_embree_scene(scene, cache, EmbreeQuality::high, robust_);
   }
+  size_t embree_bytes() const { return scene_ ? scene_->bytes() : 0; }
   bool robust_;
   std::shared_ptr<const EmbreeScene> scene_;
 };

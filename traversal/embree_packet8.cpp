@@ -10,6 +10,7 @@ class EmbreePacket8 final : public TraverserBase<EmbreePacket8>, EmbreeTraverser
   explicit EmbreePacket8(const SchemeConfig& cfg) : EmbreeTraverserBase(cfg) {}
   std::string_view name() const override { return "embree_packet8"; }
   void prepare(const Scene& scene, StructureCache& cache) override { prepare_embree(scene, cache); }
+  size_t structure_bytes() const override { return embree_bytes(); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {

@@ -12,6 +12,7 @@ class EmbreeStream final : public TraverserBase<EmbreeStream>, EmbreeTraverserBa
   explicit EmbreeStream(const SchemeConfig& cfg) : EmbreeTraverserBase(cfg) {}
   std::string_view name() const override { return "embree_stream"; }
   void prepare(const Scene& scene, StructureCache& cache) override { prepare_embree(scene, cache); }
+  size_t structure_bytes() const override { return embree_bytes(); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
