@@ -13,8 +13,8 @@ namespace tb {
 
 std::string OctreeParams::key() const {
   char buf[128];
-  std::snprintf(buf, sizeof buf, "octree:leaf_prims=%d:max_depth=%d:mbvh_leaf=%d:merge=%d:bins=%d", leaf_prims,
-                max_depth, mbvh_leaf, merge, bins);  // threads do not change the structure
+  std::snprintf(buf, sizeof buf, "octree:leaf_prims=%d:max_depth=%d:mbvh_leaf=%d:merge=%d:bins=%d:width=%d",
+                leaf_prims, max_depth, mbvh_leaf, merge, bins, width);  // threads do not change the structure
   return buf;
 }
 
@@ -129,8 +129,9 @@ struct BNode {
   bool leaf = true;
 };
 
+template <int N>
 struct LocalMBVH {
-  std::vector<MBVHNode<4>> nodes;
+  std::vector<MBVHNode<N>> nodes;
   std::vector<TriBlock<4>> blocks;
   uint32_t max_depth = 0, leaves = 0;
   double leaf_depth_sum = 0;
@@ -141,16 +142,10 @@ class MiniBuilder {
  public:
   MiniBuilder(const Scene& scene, const OctreeParams& p) : scene_(scene), p_(p) {}
 
-  void build(std::vector<Item>& items, LocalMBVH& out) {
+  void build(std::vector<Item>& items, LocalMBVH<4>& out) {
     items_ = &items;
     out_ = &out;
-    bnodes_.clear();
-    bnodes_.reserve(2 * items.size() + 1);
-    BNode root;
-    root.first = 0;
-    root.count = uint32_t(items.size());
-    bnodes_.push_back(root);
-    binary();
+    start(items);
     for (const Item& it : items) out.bounds.grow(it.box);
     out.nodes.emplace_back();
     std::vector<uint32_t> kids;
@@ -159,7 +154,59 @@ class MiniBuilder {
     fill(0, std::move(kids), 1);
   }
 
+  // Width 8: the same binary tree over clipped boxes, handed to structures/mbvh.cpp's SAH-optimal
+  // collapse (Ylitie, Karras, Laine 2017, §3.2) as a BVH in its layout, so the 8-wide mini-MBVHs
+  // are built exactly like mbvh8_single's tree. Its 4-wide triangle blocks keep RayGrid's
+  // two-rays-per-AVX2-pass leaf test.
+  void build8(std::vector<Item>& items, LocalMBVH<8>& out) {
+    items_ = &items;
+    start(items);
+    for (const Item& it : items) out.bounds.grow(it.box);
+    // BVH layout: root 0, slot 1 unused, siblings adjacent; binary node i > 0 moves to i + 1.
+    BVH bvh;
+    bvh.nodes.resize(bnodes_.size() + 1);
+    for (size_t i = 0; i < bnodes_.size(); ++i) {
+      const BNode& b = bnodes_[i];
+      BVHNode& n = bvh.nodes[i == 0 ? 0 : i + 1];
+      n.lo = b.box.lo, n.hi = b.box.hi;
+      n.left_first = b.leaf ? b.first : b.left + 1;
+      n.count = b.leaf ? b.count : 0;
+    }
+    bvh.prim_index.resize(items.size());
+    for (size_t i = 0; i < items.size(); ++i) bvh.prim_index[i] = items[i].tri;
+    MBVHBuildParams mp;
+    mp.sah_collapse = true;
+    mp.merge = p_.merge;
+    mp.small = 0;
+    MBVH<8, 4> m = MBVH<8, 4>::collapse(scene_, bvh, mp);
+    out.nodes.assign(m.nodes.begin(), m.nodes.end());
+    out.blocks.assign(m.blocks.begin(), m.blocks.end());
+    out.max_depth = m.stats.max_depth;
+    out.leaves = m.stats.leaves;
+    // Leaf depths (root = 1) for the statistics.
+    std::vector<std::pair<uint32_t, uint32_t>> stack{{0u, 1u}};
+    while (!stack.empty()) {
+      const auto [ni, d] = stack.back();
+      stack.pop_back();
+      const MBVHNode<8>& nd = out.nodes[ni];
+      for (uint32_t c = 0; c < nd.num_children; ++c) {
+        if (mbvh_ref::is_leaf(nd.ref[c])) out.leaf_depth_sum += d;
+        else stack.push_back({nd.ref[c], d + 1});
+      }
+    }
+  }
+
  private:
+  void start(std::vector<Item>& items) {
+    bnodes_.clear();
+    bnodes_.reserve(2 * items.size() + 1);
+    BNode root;
+    root.first = 0;
+    root.count = uint32_t(items.size());
+    bnodes_.push_back(root);
+    binary();
+  }
+
   void binary() {
     std::vector<Item>& items = *items_;
     const int nbins = std::clamp(p_.bins, 2, 256);
@@ -307,7 +354,7 @@ class MiniBuilder {
   const Scene& scene_;
   const OctreeParams& p_;
   std::vector<Item>* items_ = nullptr;
-  LocalMBVH* out_ = nullptr;
+  LocalMBVH<4>* out_ = nullptr;
   std::vector<BNode> bnodes_;
 };
 
@@ -317,6 +364,106 @@ AABB grown(const AABB& b, float pad) {
 
 }  // namespace
 
+// Mini-MBVHs, leaves in parallel (each builds into its own arrays), then concatenated into
+// `mini` (leaf after leaf: a leaf's nodes and blocks are contiguous).
+template <int N>
+void build_minis(const Scene& scene, const OctreeParams& p, const std::vector<AABB>& tbox,
+                 const std::vector<std::vector<uint32_t>>& leaf_refs, Octree& o, MBVH<N, 4>& mini) {
+  const float pad = o.pad;
+  OctreeStats& s = o.stats;
+  const uint32_t nl = uint32_t(o.leaves.size());
+  std::vector<LocalMBVH<N>> local(nl);
+  {
+    std::atomic<uint32_t> next{0};
+    auto worker = [&] {
+      MiniBuilder mb(scene, p);
+      std::vector<Item> items;
+      for (uint32_t l; (l = next.fetch_add(1)) < nl;) {
+        const std::vector<uint32_t>& refs = leaf_refs[l];
+        if (refs.empty()) continue;
+        const OctreeNode& nd = o.nodes[o.leaves[l].node];
+        const AABB e = grown(AABB{nd.lo, nd.hi}, pad);
+        items.clear();
+        for (uint32_t t : refs) {
+          Item it;
+          it.tri = t;
+          if (e.contains(tbox[t])) it.box = tbox[t];
+          else if (!clip_triangle_to_box(scene.vertex(t, 0), scene.vertex(t, 1), scene.vertex(t, 2), e, &it.box))
+            continue;  // cannot happen: the same test admitted it
+          it.centre = it.box.centre();
+          items.push_back(it);
+        }
+        if (items.empty()) continue;
+        if constexpr (N == 8) mb.build8(items, local[l]);
+        else mb.build(items, local[l]);
+      }
+    };
+    const int threads = std::clamp(p.threads, 1, 64);
+    std::vector<std::thread> pool;
+    for (int t = 1; t < threads && uint32_t(t) < nl; ++t) pool.emplace_back(worker);
+    worker();
+    for (auto& t : pool) t.join();
+  }
+  size_t total_nodes = 0, total_blocks = 0;
+  for (const auto& l : local) total_nodes += l.nodes.size(), total_blocks += l.blocks.size();
+  if (total_blocks > mbvh_ref::kMaxBlocks) throw std::runtime_error("octree: too many triangle blocks");
+  mini.nodes.reserve(total_nodes);
+  mini.blocks.reserve(total_blocks);
+  double leaf_depth_sum = 0, mbvh_leaf_depth_sum = 0;
+  uint64_t mbvh_leaves = 0, mbvh_nodes_nonempty = 0;
+  for (uint32_t l = 0; l < nl; ++l) {
+    OctreeLeaf& lf = o.leaves[l];
+    LocalMBVH<N>& m = local[l];
+    leaf_depth_sum += o.nodes[lf.node].depth;
+    s.max_depth = std::max(s.max_depth, o.nodes[lf.node].depth);
+    if (m.nodes.empty()) {
+      s.empty_leaves++;
+      continue;
+    }
+    const uint32_t nb = uint32_t(mini.nodes.size()), bb = uint32_t(mini.blocks.size());
+    for (MBVHNode<N> nd : m.nodes) {
+      for (uint32_t i = 0; i < nd.num_children; ++i) {
+        const uint32_t r = nd.ref[i];
+        nd.ref[i] = mbvh_ref::is_leaf(r) ? mbvh_ref::make_leaf(mbvh_ref::first_block(r) + bb, mbvh_ref::num_tris(r))
+                                         : r + nb;
+      }
+      mini.nodes.push_back(nd);
+    }
+    mini.blocks.insert(mini.blocks.end(), m.blocks.begin(), m.blocks.end());
+    lf.mbvh_root = nb;
+    lf.first_node = nb, lf.num_nodes = uint32_t(m.nodes.size());
+    lf.first_block = bb, lf.num_blocks = uint32_t(m.blocks.size());
+    lf.refs = uint32_t(leaf_refs[l].size());
+    lf.mbvh_depth = m.max_depth;
+    lf.mbvh_leaf_depth = m.leaves ? m.leaf_depth_sum / m.leaves : 0.0;
+    lf.cull = m.bounds;
+    {
+      const Vec3 ce = m.bounds.extent(), le = o.nodes[lf.node].hi - o.nodes[lf.node].lo;
+      lf.cull_tight = double(ce.x) * ce.y * ce.z < 0.5 * double(le.x) * le.y * le.z;
+    }
+    s.refs += lf.refs;
+    s.mbvh_max_depth = std::max(s.mbvh_max_depth, m.max_depth);
+    mbvh_leaf_depth_sum += m.leaf_depth_sum;
+    mbvh_leaves += m.leaves;
+    mbvh_nodes_nonempty += m.nodes.size();
+    m = LocalMBVH<N>{};
+  }
+  mini.stats.width = N, mini.stats.tri_width = 4;
+  mini.stats.nodes = uint32_t(mini.nodes.size());
+  mini.stats.blocks = uint32_t(mini.blocks.size());
+  mini.stats.leaves = uint32_t(mbvh_leaves);
+  mini.stats.max_depth = s.mbvh_max_depth;
+  mini.stats.triangles = uint32_t(s.refs);
+  mini.stats.node_bytes = mini.nodes.size() * sizeof(MBVHNode<N>);
+  mini.stats.tri_bytes = mini.blocks.size() * sizeof(TriBlock<4>);
+  s.leaves = nl;
+  const uint32_t nonempty = nl - s.empty_leaves;
+  s.avg_leaf_depth = nl ? leaf_depth_sum / nl : 0.0;
+  s.avg_prims_per_leaf = nonempty ? double(s.refs) / nonempty : 0.0;
+  s.avg_mbvh_nodes = nonempty ? double(mbvh_nodes_nonempty) / nonempty : 0.0;
+  s.avg_mbvh_leaf_depth = mbvh_leaves ? mbvh_leaf_depth_sum / double(mbvh_leaves) : 0.0;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 Octree Octree::build(const Scene& scene, const OctreeParams& p) {
@@ -325,6 +472,7 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
   if (p.max_depth < 0 || p.max_depth > 20) throw InputError("octree: max_depth must be in [0, 20]");
   if (p.mbvh_leaf < 1 || p.mbvh_leaf > 64) throw InputError("octree: mbvh_leaf must be in [1, 64]");
   if (p.merge < 0 || p.merge > 64) throw InputError("octree: merge must be in [0, 64]");
+  if (p.width != 4 && p.width != 8) throw InputError("octree: width must be 4 or 8");
   Octree o;
   o.params = p;
   const uint32_t n = uint32_t(scene.num_triangles());
@@ -469,102 +617,13 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
     }
   }
 
-  // Mini-MBVHs, leaves in parallel (each builds into its own arrays), then concatenated.
-  const uint32_t nl = uint32_t(o.leaves.size());
-  std::vector<LocalMBVH> local(nl);
-  {
-    std::atomic<uint32_t> next{0};
-    auto worker = [&] {
-      MiniBuilder mb(scene, p);
-      std::vector<Item> items;
-      for (uint32_t l; (l = next.fetch_add(1)) < nl;) {
-        const std::vector<uint32_t>& refs = leaf_refs[l];
-        if (refs.empty()) continue;
-        const OctreeNode& nd = o.nodes[o.leaves[l].node];
-        const AABB e = grown(AABB{nd.lo, nd.hi}, pad);
-        items.clear();
-        for (uint32_t t : refs) {
-          Item it;
-          it.tri = t;
-          if (e.contains(tbox[t])) it.box = tbox[t];
-          else if (!clip_triangle_to_box(scene.vertex(t, 0), scene.vertex(t, 1), scene.vertex(t, 2), e, &it.box))
-            continue;  // cannot happen: the same test admitted it
-          it.centre = it.box.centre();
-          items.push_back(it);
-        }
-        if (items.empty()) continue;
-        mb.build(items, local[l]);
-      }
-    };
-    const int threads = std::clamp(p.threads, 1, 64);
-    std::vector<std::thread> pool;
-    for (int t = 1; t < threads && uint32_t(t) < nl; ++t) pool.emplace_back(worker);
-    worker();
-    for (auto& t : pool) t.join();
-  }
-  size_t total_nodes = 0, total_blocks = 0;
-  for (const auto& l : local) total_nodes += l.nodes.size(), total_blocks += l.blocks.size();
-  if (total_blocks > mbvh_ref::kMaxBlocks) throw std::runtime_error("octree: too many triangle blocks");
-  o.mini.nodes.reserve(total_nodes);
-  o.mini.blocks.reserve(total_blocks);
+  if (p.width == 8) build_minis<8>(scene, p, tbox, leaf_refs, o, o.mini8);
+  else build_minis<4>(scene, p, tbox, leaf_refs, o, o.mini);
   OctreeStats& s = o.stats;
-  double leaf_depth_sum = 0, mbvh_leaf_depth_sum = 0;
-  uint64_t mbvh_leaves = 0, mbvh_nodes_nonempty = 0;
-  for (uint32_t l = 0; l < nl; ++l) {
-    OctreeLeaf& lf = o.leaves[l];
-    LocalMBVH& m = local[l];
-    leaf_depth_sum += o.nodes[lf.node].depth;
-    s.max_depth = std::max(s.max_depth, o.nodes[lf.node].depth);
-    if (m.nodes.empty()) {
-      s.empty_leaves++;
-      continue;
-    }
-    const uint32_t nb = uint32_t(o.mini.nodes.size()), bb = uint32_t(o.mini.blocks.size());
-    for (MBVHNode<4> nd : m.nodes) {
-      for (uint32_t i = 0; i < nd.num_children; ++i) {
-        const uint32_t r = nd.ref[i];
-        nd.ref[i] = mbvh_ref::is_leaf(r) ? mbvh_ref::make_leaf(mbvh_ref::first_block(r) + bb, mbvh_ref::num_tris(r))
-                                         : r + nb;
-      }
-      o.mini.nodes.push_back(nd);
-    }
-    o.mini.blocks.insert(o.mini.blocks.end(), m.blocks.begin(), m.blocks.end());
-    lf.mbvh_root = nb;
-    lf.first_node = nb, lf.num_nodes = uint32_t(m.nodes.size());
-    lf.first_block = bb, lf.num_blocks = uint32_t(m.blocks.size());
-    lf.refs = uint32_t(leaf_refs[l].size());
-    lf.mbvh_depth = m.max_depth;
-    lf.mbvh_leaf_depth = m.leaves ? m.leaf_depth_sum / m.leaves : 0.0;
-    lf.cull = m.bounds;
-    {
-      const Vec3 ce = m.bounds.extent(), le = o.nodes[lf.node].hi - o.nodes[lf.node].lo;
-      lf.cull_tight = double(ce.x) * ce.y * ce.z < 0.5 * double(le.x) * le.y * le.z;
-    }
-    s.refs += lf.refs;
-    s.mbvh_max_depth = std::max(s.mbvh_max_depth, m.max_depth);
-    mbvh_leaf_depth_sum += m.leaf_depth_sum;
-    mbvh_leaves += m.leaves;
-    mbvh_nodes_nonempty += m.nodes.size();
-    m = LocalMBVH{};
-  }
-  o.mini.stats.width = 4, o.mini.stats.tri_width = 4;
-  o.mini.stats.nodes = uint32_t(o.mini.nodes.size());
-  o.mini.stats.blocks = uint32_t(o.mini.blocks.size());
-  o.mini.stats.leaves = uint32_t(mbvh_leaves);
-  o.mini.stats.max_depth = s.mbvh_max_depth;
-  o.mini.stats.triangles = uint32_t(s.refs);
-  o.mini.stats.node_bytes = o.mini.nodes.size() * sizeof(MBVHNode<4>);
-  o.mini.stats.tri_bytes = o.mini.blocks.size() * sizeof(TriBlock<4>);
   s.nodes = uint32_t(o.nodes.size());
-  s.leaves = nl;
   s.triangles = n;
-  const uint32_t nonempty = nl - s.empty_leaves;
-  s.avg_leaf_depth = nl ? leaf_depth_sum / nl : 0.0;
-  s.avg_prims_per_leaf = nonempty ? double(s.refs) / nonempty : 0.0;
-  s.avg_mbvh_nodes = nonempty ? double(mbvh_nodes_nonempty) / nonempty : 0.0;
-  s.avg_mbvh_leaf_depth = mbvh_leaves ? mbvh_leaf_depth_sum / double(mbvh_leaves) : 0.0;
   s.bytes = o.nodes.size() * sizeof(OctreeNode) + o.leaves.size() * sizeof(OctreeLeaf) +
-            o.mini.stats.node_bytes + o.mini.stats.tri_bytes;
+            o.mini.stats.node_bytes + o.mini.stats.tri_bytes + o.mini8.stats.node_bytes + o.mini8.stats.tri_bytes;
   s.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return o;
 }
@@ -572,8 +631,9 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
 std::vector<uint32_t> Octree::leaf_triangles(uint32_t leaf) const {
   const OctreeLeaf& lf = leaves[leaf];
   std::vector<uint32_t> out;
+  const auto& blocks = mini_blocks();
   for (uint32_t b = lf.first_block; b < lf.first_block + lf.num_blocks; ++b)
-    for (int l = 0; l < 4; ++l) out.push_back(mini.blocks[b].prim[l]);
+    for (int l = 0; l < 4; ++l) out.push_back(blocks[b].prim[l]);
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;

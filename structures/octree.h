@@ -45,6 +45,11 @@ struct OctreeParams {
   int mbvh_leaf = 4;      // binary SAH leaves of the mini-MBVHs: at most this many triangles
   int merge = 4;          // binary subtrees of at most this many triangles become one leaf
   int bins = 16;          // SAH bins per axis
+  // Mini-MBVH width. 4: the thesis' SSE mini-MBVHs, collapsed greedily (`merge` = subtrees of at
+  // most that many triangles become one leaf). 8: AVX2 nodes (MBVHNode<8>, one 8-lane box test
+  // per ray), collapsed SAH-optimally by structures/mbvh.cpp's dynamic programme (Ylitie et al.
+  // 2017; `merge` = the largest leaf it may form), triangles still in 4-wide blocks (Octree::mini8).
+  int width = 4;
   int threads = 2;        // mini-MBVH build threads (the structure does not depend on it)
   std::string key() const;
 };
@@ -93,7 +98,8 @@ struct OctreeStats {
 struct Octree {
   std::vector<OctreeNode> nodes;  // nodes[0] = root
   std::vector<OctreeLeaf> leaves;
-  MBVH<4, 4> mini;                // every leaf's mini-MBVH: nodes and triangle blocks
+  MBVH<4, 4> mini;                // every leaf's mini-MBVH: nodes and triangle blocks (width 4)
+  MBVH<8, 4> mini8;               // the same with 8-wide nodes (width 8); the other one is empty
   float pad = 0.f;                // leaves reference triangles within this distance of their box
   OctreeParams params;
   OctreeStats stats;
@@ -124,6 +130,8 @@ struct Octree {
     const __m128 in = _mm_and_ps(_mm_cmpgt_ps(pp, _mm_loadu_ps(&n.lo.x)), _mm_cmplt_ps(pp, _mm_loadu_ps(&n.hi.x)));
     return (_mm_movemask_ps(in) & 7) == 7;
   }
+  // The triangle blocks of whichever mini-MBVH array is in use (4-wide blocks either way).
+  const aligned_vector<TriBlock<4>>& mini_blocks() const { return params.width == 8 ? mini8.blocks : mini.blocks; }
   // Scene triangles referenced by a leaf (each once), for tests and statistics.
   std::vector<uint32_t> leaf_triangles(uint32_t leaf) const;
 };

@@ -275,6 +275,9 @@ const std::vector<std::pair<std::string, SchemeConfig>>& configs() {
       {"queue=1024", config({{"queue", 1024}})},
       {"leaf_prims=64", config({{"leaf_prims", 64}, {"max_depth", 8}})},
       {"leaf_prims=64,queue=7", config({{"leaf_prims", 64}, {"max_depth", 8}, {"queue", 7}})},
+      // The thesis' 4-wide mini-MBVHs (the default is 8 wide).
+      {"width=4", config({{"width", 4}})},
+      {"width=4,leaf_prims=64,queue=7", config({{"width", 4}, {"leaf_prims", 64}, {"max_depth", 8}, {"queue", 7}})},
   };
   return c;
 }

@@ -42,8 +42,10 @@
 // not advance — never seen) or whose walk through empty leaves exceeds the number of leaves is
 // finished by a full traversal of every leaf's mini-MBVH and counted in RayGridStats::fallbacks.
 //
-// Parameters: queue (M, default 384, §5.3.5), leaf_prims (default 4096, §5.4.1), max_depth
-// (default 10), feed (rays per slice), leaf_size / merge / bins of the mini-MBVHs (4 / 4 / 16,
+// Parameters: queue (M, default 768: the thesis found 384 best for 4-wide nodes, §5.3.5; with
+// 8-wide ones 768 measured 2-5% faster on bounce:3), leaf_prims (default 4096, §5.4.1), max_depth
+// (default 10), feed (rays per slice), width of the mini-MBVHs (default 8, see stream), and
+// leaf_size / merge / bins of their binary builds (4 / 4 / 16,
 // as mbvh4_single).
 #include <algorithm>
 #include <atomic>
@@ -85,7 +87,7 @@ constexpr uint32_t kMaxChunk = 1u << kIdBits;
 // (SoA, eight rays per AVX2 instruction; the thesis' reason for SoA queues, §5.3.2). `meta`
 // packs the direction's sign octant (bits 0-2: the reciprocal is negative on x, y, z), and the
 // watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
-enum Derived : uint32_t { kIX, kIY, kIZ, kFX, kFY, kFZ, kSX, kSY, kSZ, kTexit, kDerived };
+enum Derived : uint32_t { kIX, kIY, kIZ, kFX, kFY, kFZ, kSX, kSY, kSZ, kTexit, kPX, kPY, kPZ, kDerived };
 
 struct Task {
   uint32_t ref;    // mini-MBVH child reference (interior node or leaf)
@@ -114,6 +116,16 @@ inline float walk_entry(const WalkRay& w, const AABB& b) {
   return tn <= tf ? tn : INFINITY;
 }
 
+// Pointers to the SoA arrays of the queue being processed.
+struct Stream {
+  const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
+  const uint32_t* rec;
+  float *ix, *iy, *iz, *fx, *fy, *fz, *sx, *sy, *sz, *texit;
+  float *px, *py, *pz;  // the origin permuted to (kx, ky, kz) for the watertight test
+  uint32_t *meta, *axis;
+  Hit* hits;
+};
+
 // Two rays against one block of four triangles in one AVX2 pass: ray A in the low 128-bit half,
 // ray B in the high half, each half the watertight test of mbvh.h's block_intersect (Woop,
 // Benthin and Wald 2013) with the same float operations in the same order per lane, so every
@@ -122,8 +134,8 @@ inline float walk_entry(const WalkRay& w, const AABB& b) {
 struct PairRay {
   __m256 ox, oy, oz, sx, sy, sz;  // origin permuted to (kx, ky, kz) and the shear, per half
   uint32_t kx[2], ky[2], kz[2];
-  Vec3 org[2], dir[2];
-  float tmin[2], szs[2];
+  const Stream* v;  // the rest of the two rays' records, read only for candidate hits
+  uint32_t id[2];
 };
 
 inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32_t row_b) {
@@ -172,7 +184,8 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) 
   S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
   for (int ray = 0; ray < 2; ++ray) {
     if (!((m >> (4 * ray)) & 15)) continue;
-    const Vec3 o = r.org[ray], d = r.dir[ray];
+    const uint32_t id = r.id[ray];
+    const Vec3 o{r.v->ox[id], r.v->oy[id], r.v->oz[id]}, d{r.v->dx[id], r.v->dy[id], r.v->dz[id]};
     const __m256d v0x = _mm256_cvtps_pd(_mm_load_ps(b.v[0][0])), v0y = _mm256_cvtps_pd(_mm_load_ps(b.v[0][1])),
                   v0z = _mm256_cvtps_pd(_mm_load_ps(b.v[0][2]));
     const __m256d ax = _mm256_sub_pd(v0x, _mm256_set1_pd(o.x)), ay = _mm256_sub_pd(v0y, _mm256_set1_pd(o.y)),
@@ -198,7 +211,7 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) 
       _mm256_store_pd(dns, dn);
       for (int t4 = 0; t4 < 4; ++t4) {
         const int l = 4 * ray + t4;
-        if (dns[t4] == 0.0) ts[l] = r.szs[ray] * (us[l] * azs[l] + vs[l] * bzs[l] + ws[l] * czs[l]) * (1.f / dets[l]);
+        if (dns[t4] == 0.0) ts[l] = r.v->sz[r.id[ray]] * (us[l] * azs[l] + vs[l] * bzs[l] + ws[l] * czs[l]) * (1.f / dets[l]);
       }
     }
   }
@@ -207,7 +220,7 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) 
     const int ray = l >> 2, t4 = l & 3;
     Hit& h = *hit[ray];
     const float t = ts[l];
-    if (!(t >= r.tmin[ray] && t < h.t)) continue;
+    if (!(t >= r.v->tmin[r.id[ray]] && t < h.t)) continue;
     const float inv_det = 1.f / dets[l];
     h.t = t;
     h.u = vs[l] * inv_det;
@@ -243,30 +256,41 @@ struct Scratch {
   aligned_vector<uint32_t> meta, axis;
   std::vector<uint32_t> moving;       // the rays of the queue that move on to another leaf
   std::vector<Hit> hits;
-  std::vector<uint16_t> lanes[4];
+  std::vector<uint16_t> lanes[8];  // one per child slot (4 or 8 used)
+  std::vector<uint8_t> masks;      // per ray of a task: the children it entered
   std::vector<Task> tasks;
   std::vector<MBVHStackEntry> single;
 };
 
-// Pointers to the SoA arrays of the queue being processed.
-struct Stream {
-  const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
-  const uint32_t* rec;
-  float *ix, *iy, *iz, *fx, *fy, *fz, *sx, *sy, *sz, *texit;
-  uint32_t *meta, *axis;
-  Hit* hits;
+// Left-packing shuffles: for an 8-bit mask, the byte shuffle that moves the 16-bit elements whose
+// bit is set to the front, in order.
+struct PackLut {
+  alignas(16) uint8_t s[256][16];
+  constexpr PackLut() : s{} {
+    for (int m = 0; m < 256; ++m) {
+      int o = 0;
+      for (int e = 0; e < 8; ++e)
+        if (m >> e & 1) s[m][2 * o] = uint8_t(2 * e), s[m][2 * o + 1] = uint8_t(2 * e + 1), ++o;
+      for (; o < 8; ++o) s[m][2 * o] = s[m][2 * o + 1] = 0x80;
+    }
+  }
 };
+inline constexpr PackLut kPackLut{};
 
 class RayGrid final : public TraverserBase<RayGrid> {
  public:
   explicit RayGrid(const SchemeConfig& cfg) : cfg_(cfg) {
-    m_ = cfg.get_int("queue", 384);
+    m_ = cfg.get_int("queue", 768);
     const int feed = cfg.get_int("feed", int(kMaxChunk));
     params_.leaf_prims = cfg.get_int("leaf_prims", params_.leaf_prims);
     params_.max_depth = cfg.get_int("max_depth", params_.max_depth);
     params_.mbvh_leaf = cfg.get_int("leaf_size", params_.mbvh_leaf);
-    params_.merge = cfg.get_int("merge", params_.merge);
     params_.bins = cfg.get_int("bins", params_.bins);
+    // 8-wide mini-MBVHs by default (§5.3.2 uses the SIMD width of its machine, 4): on bounce:3
+    // they made raygrid 5-25% faster than the thesis' 4-wide ones (docs/PERFORMANCE.md).
+    params_.width = cfg.get_int("width", 8);
+    params_.merge = cfg.get_int("merge", params_.merge);
+    if (params_.width != 4 && params_.width != 8) throw InputError("parameter width must be 4 or 8");
     if (m_ < 1 || m_ > 65535) throw InputError("parameter queue must be in [1, 65535]");
     if (feed < 1) throw InputError("parameter feed must be >= 1");
     feed_ = uint32_t(feed);
@@ -284,18 +308,19 @@ class RayGrid final : public TraverserBase<RayGrid> {
       const bool planes = cfg_.kernel == TriKernel::plane || cfg_.kernel == TriKernel::plane_rcp;
       tris_ = cache.get<TriangleSet>(params_.key() + (planes ? ":tris+planes" : ":tris"), [&] {
         TriangleSet t;
-        t.build(scene, oct_->mini.lane_prims(), cfg_.kernel);
+        t.build(scene, params_.width == 8 ? oct_->mini8.lane_prims() : oct_->mini.lane_prims(), cfg_.kernel);
         return t;
       });
     }
-    depth_ = oct_->mini.stats.max_depth + 1;
+    depth_ = (params_.width == 8 ? oct_->mini8.stats.max_depth : oct_->mini.stats.max_depth) + 1;
     std::lock_guard lock(pool_mutex_);
     pool_.clear();
   }
   std::string structure_info() const override {
     if (!oct_) return {};
     const uint64_t om = uint64_t(oct_->stats.leaves) * uint64_t(m_) * kRecordBytes;
-    return oct_->stats.describe() + " mbvh_nodes=" + std::to_string(oct_->mini.stats.nodes) +
+    return oct_->stats.describe() + " mbvh_width=" + std::to_string(params_.width) +
+           " mbvh_nodes=" + std::to_string(oct_->mini.stats.nodes + oct_->mini8.stats.nodes) +
            " queue=" + std::to_string(m_) + " record_bytes=" + std::to_string(kRecordBytes) +
            " queue_bytes=(O*M+N)*36=" + std::to_string(om) + "+36N";
   }
@@ -465,12 +490,12 @@ class RayGrid final : public TraverserBase<RayGrid> {
   }
 
   // The guard's way out: the ray against every leaf's mini-MBVH, one ray at a time.
-  template <TriKernel K, class P>
+  template <int N, TriKernel K, class P>
   void full_traversal(Scratch& s, const WalkRay& w, Hit& out, P& probe) const {
     const Octree& oct = *oct_;
     Ray ray{w.org, w.tmin, w.dir, w.tbest};
     const RayCtx rc(ray);
-    const NodeRay<4> nr(rc, w.tmin);
+    const NodeRay<N> nr(rc, w.tmin);
     const TriRay<4> tr(rc, w.tmin);
     Hit h{w.tbest, kNoHit, 0.f, 0.f};
     WalkRay cur = w;
@@ -478,7 +503,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       if (lf.empty()) continue;
       cur.tbest = h.t;
       if (walk_entry(cur, lf.cull) == INFINITY) continue;
-      mbvh_traverse<4, 4, K>(oct.mini, tris_.get(), nr, tr, &rc, lf.mbvh_root, h, s.single.data(), probe);
+      mbvh_traverse<N, 4, K>(mini<N>(), tris_.get(), nr, tr, &rc, lf.mbvh_root, h, s.single.data(), probe);
     }
     if (h.prim != kNoHit) out = h;
   }
@@ -512,6 +537,15 @@ class RayGrid final : public TraverserBase<RayGrid> {
       const __m256 dkx = _mm256_blendv_ps(_mm256_blendv_ps(dx, dz, k1), dy, k0);
       const __m256 dky = _mm256_blendv_ps(_mm256_blendv_ps(dy, dx, k1), dz, k0);
       const __m256 swap = _mm256_cmp_ps(dkz, zero, _CMP_LT_OQ);
+      {  // the origin in the same permutation (TriRay's ox, oy, oz)
+        const __m256 ox = _mm256_load_ps(v.ox + k), oy = _mm256_load_ps(v.oy + k), oz = _mm256_load_ps(v.oz + k);
+        const __m256 okz = _mm256_blendv_ps(_mm256_blendv_ps(oz, oy, k1), ox, k0);
+        const __m256 okx = _mm256_blendv_ps(_mm256_blendv_ps(ox, oz, k1), oy, k0);
+        const __m256 oky = _mm256_blendv_ps(_mm256_blendv_ps(oy, ox, k1), oz, k0);
+        _mm256_store_ps(v.px + k, _mm256_blendv_ps(okx, oky, swap));
+        _mm256_store_ps(v.py + k, _mm256_blendv_ps(oky, okx, swap));
+        _mm256_store_ps(v.pz + k, okz);
+      }
       _mm256_store_ps(v.sx + k, _mm256_div_ps(_mm256_blendv_ps(dkx, dky, swap), dkz));
       _mm256_store_ps(v.sy + k, _mm256_div_ps(_mm256_blendv_ps(dky, dkx, swap), dkz));
       _mm256_store_ps(v.sz + k, _mm256_div_ps(one, dkz));
@@ -568,34 +602,33 @@ class RayGrid final : public TraverserBase<RayGrid> {
     return TriRay<4>(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.dx[id], v.dy[id], v.dz[id]}, int(m >> 4 & 3),
                      int(m >> 6 & 3), int(m >> 8 & 3), v.sx[id], v.sy[id], v.sz[id], v.tmin[id]);
   }
+  // The permuted origins come from prepare_stream, so a pair costs broadcasts only (a pair is
+  // built per leaf visit: the component selection per ray was 137 instructions a pair).
   static PairRay pair_ray(const Stream& v, uint32_t a, uint32_t b) {
     PairRay p;
     const uint32_t ma = v.meta[a], mb = v.meta[b];
     p.kx[0] = ma >> 4 & 3, p.ky[0] = ma >> 6 & 3, p.kz[0] = ma >> 8 & 3;
     p.kx[1] = mb >> 4 & 3, p.ky[1] = mb >> 6 & 3, p.kz[1] = mb >> 8 & 3;
-    p.org[0] = {v.ox[a], v.oy[a], v.oz[a]}, p.org[1] = {v.ox[b], v.oy[b], v.oz[b]};
-    p.dir[0] = {v.dx[a], v.dy[a], v.dz[a]}, p.dir[1] = {v.dx[b], v.dy[b], v.dz[b]};
-    p.tmin[0] = v.tmin[a], p.tmin[1] = v.tmin[b];
-    p.szs[0] = v.sz[a], p.szs[1] = v.sz[b];
-    auto two = [](float lo, float hi) { return _mm256_setr_m128(_mm_set1_ps(lo), _mm_set1_ps(hi)); };
-    p.ox = two(p.org[0][int(p.kx[0])], p.org[1][int(p.kx[1])]);
-    p.oy = two(p.org[0][int(p.ky[0])], p.org[1][int(p.ky[1])]);
-    p.oz = two(p.org[0][int(p.kz[0])], p.org[1][int(p.kz[1])]);
-    p.sx = two(v.sx[a], v.sx[b]), p.sy = two(v.sy[a], v.sy[b]), p.sz = two(v.sz[a], v.sz[b]);
+    p.v = &v, p.id[0] = a, p.id[1] = b;
+    auto two = [](const float* x, uint32_t lo, uint32_t hi) {
+      return _mm256_setr_m128(_mm_broadcast_ss(x + lo), _mm_broadcast_ss(x + hi));
+    };
+    p.ox = two(v.px, a, b), p.oy = two(v.py, a, b), p.oz = two(v.pz, a, b);
+    p.sx = two(v.sx, a, b), p.sy = two(v.sy, a, b), p.sz = two(v.sz, a, b);
     return p;
   }
   static RayCtx ray_ctx(const Stream& v, uint32_t id) {
     return RayCtx(Ray{Vec3{v.ox[id], v.oy[id], v.oz[id]}, v.tmin[id], Vec3{v.dx[id], v.dy[id], v.dz[id]}, INFINITY});
   }
 
-  template <TriKernel K, class P>
+  template <int N, TriKernel K, class P>
   void single(Scratch& s, const Stream& v, uint32_t id, uint32_t ref, P& probe) const {
-    const NodeRay<4> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]}, v.tmin[id]);
+    const NodeRay<N> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]}, v.tmin[id]);
     if constexpr (K == TriKernel::watertight) {
-      mbvh_traverse<4, 4, K>(oct_->mini, nullptr, nr, tri_ray(v, id), nullptr, ref, v.hits[id], s.single.data(), probe);
+      mbvh_traverse<N, 4, K>(mini<N>(), nullptr, nr, tri_ray(v, id), nullptr, ref, v.hits[id], s.single.data(), probe);
     } else {
       const RayCtx rc = ray_ctx(v, id);
-      mbvh_traverse<4, 4, K>(oct_->mini, tris_.get(), nr, tri_ray(v, id), &rc, ref, v.hits[id], s.single.data(), probe);
+      mbvh_traverse<N, 4, K>(mini<N>(), tris_.get(), nr, tri_ray(v, id), &rc, ref, v.hits[id], s.single.data(), probe);
     }
   }
 
@@ -609,18 +642,52 @@ class RayGrid final : public TraverserBase<RayGrid> {
     }
   }
 
-  template <TriKernel K, class P>
+  // Writes the ids of list[0, n) whose mask has bit c to dst (which may be list itself), in
+  // order; returns their number. Reads up to 15 entries past n and writes up to 7 past the
+  // result: the lane arrays and the mask buffer carry that slack.
+  static uint32_t pack_lane(const uint16_t* list, const uint8_t* masks, uint32_t n, unsigned c, uint16_t* dst) {
+    const __m128i shift = _mm_cvtsi32_si128(int(7 - c));
+    uint32_t o = 0;
+    for (uint32_t i = 0; i < n; i += 16) {
+      // Bit c of 16 mask bytes to bit 7 (a 16-bit shift moves each byte's bit c to its bit 7).
+      uint32_t bits = uint32_t(_mm_movemask_epi8(
+          _mm_sll_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(masks + i)), shift)));
+      if (n - i < 16) bits &= (1u << (n - i)) - 1;
+      for (uint32_t g = 0; g < 2 && i + 8 * g < n; ++g) {
+        const uint32_t b8 = (bits >> (8 * g)) & 255u;
+        const __m128i ids = _mm_loadu_si128(reinterpret_cast<const __m128i*>(list + i + 8 * g));
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + o),
+                         _mm_shuffle_epi8(ids, _mm_load_si128(reinterpret_cast<const __m128i*>(kPackLut.s[b8]))));
+        o += uint32_t(std::popcount(b8));
+      }
+    }
+    return o;
+  }
+
+  template <int N>
+  const MBVH<N, 4>& mini() const {
+    if constexpr (N == 8) return oct_->mini8;
+    else return oct_->mini;
+  }
+
+  // N = 4: the thesis' SSE MBVH/RS. N = 8: the same with one AVX2 8-child box test per ray and
+  // eight active-ray stacks (the natural SIMD width of AVX2, as mbvh8_single); with the SAH
+  // collapse a ray visits far fewer nodes for about the same cost per test.
+  template <int N, TriKernel K, class P>
   void stream(Scratch& s, const Stream& v, uint32_t n, uint32_t root, P& probe) const {
-    using S4 = mbvh_simd::V<4>;
-    const MBVH<4, 4>& m = oct_->mini;
-    const MBVHNode<4>* nodes = m.nodes.data();
+    using SN = mbvh_simd::V<N>;
+    using f = typename SN::f;
+    const MBVH<N, 4>& m = mini<N>();
+    const MBVHNode<N>* nodes = m.nodes.data();
     const TriBlock<4>* blocks = m.blocks.data();
     if (n == 1) {
-      single<K>(s, v, 0, root, probe);
+      single<N, K>(s, v, 0, root, probe);
       return;
     }
-    uint16_t* lane[4] = {s.lanes[0].data(), s.lanes[1].data(), s.lanes[2].data(), s.lanes[3].data()};
-    uint32_t head[4] = {n, 0, 0, 0};
+    uint16_t* lane[N];
+    uint32_t head[N];
+    for (int c = 0; c < N; ++c) lane[c] = s.lanes[c].data(), head[c] = 0;
+    head[0] = n;
     for (uint32_t j = 0; j < n; ++j) lane[0][j] = uint16_t(j);
     Task* tasks = s.tasks.data();
     uint32_t ntasks = 0;
@@ -633,7 +700,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       if (t.count == 1) {  // a stream of one ray: ordinary single-ray traversal of the subtree
         probe.read(list, sizeof(uint16_t));
         probe_ray(v, list[0], probe);
-        single<K>(s, v, list[0], t.ref, probe);
+        single<N, K>(s, v, list[0], t.ref, probe);
         continue;
       }
       if (mbvh_ref::is_leaf(t.ref)) {
@@ -655,56 +722,60 @@ class RayGrid final : public TraverserBase<RayGrid> {
           const uint32_t id = list[i];
           probe_ray(v, id, probe);
           if constexpr (K == TriKernel::watertight) {
-            leaf_test<4, 4, K>(m, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
+            leaf_test<4, K>(blocks, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
           } else {
             const RayCtx rc = ray_ctx(v, id);
-            leaf_test<4, 4, K>(m, tris_.get(), tri_ray(v, id), &rc, t.ref, v.hits[id]);
+            leaf_test<4, K>(blocks, tris_.get(), tri_ray(v, id), &rc, t.ref, v.hits[id]);
           }
         }
         continue;
       }
-      // Interior node: every ray of the task against the four child boxes (box_test of mbvh.h:
+      // Interior node: every ray of the task against the N child boxes (box_test of mbvh.h:
       // sign-selected slabs, NaN slabs ignored by operand order, Ize-padded far planes).
-      const MBVHNode<4>& nd = nodes[t.ref];
+      const MBVHNode<N>& nd = nodes[t.ref];
       probe.node(&nd, sizeof(nd), t.count);
       const float* b = &nd.box[0][0];
-      uint32_t h[4] = {head[0], head[1], head[2], head[3]};
-      __m128 dsum = S4::zero();
+      uint8_t* masks = s.masks.data();
+      unsigned active = 0;
+      f dsum = SN::zero();
       for (uint32_t i = 0; i < t.count; ++i) {
         probe.read(&list[i], sizeof(uint16_t));
         const uint16_t id = list[i];
         probe_ray(v, id, probe);
-        // Rows of box[6][4]: near plane lo (row a) or hi (row 3 + a) by the direction's sign.
+        // Rows of box[6][N]: near plane lo (row a) or hi (row 3 + a) by the direction's sign.
         const uint32_t oct = v.meta[id];
-        const uint32_t nx = (oct & 1) * 12, ny = (oct >> 1 & 1) * 12, nz = (oct >> 2 & 1) * 12;
-        const __m128 ox = S4::set1(v.ox[id]), oy = S4::set1(v.oy[id]), oz = S4::set1(v.oz[id]);
-        const __m128 tnx = S4::mul(S4::sub(S4::load(b + nx), ox), S4::set1(v.ix[id]));
-        const __m128 tny = S4::mul(S4::sub(S4::load(b + 4 + ny), oy), S4::set1(v.iy[id]));
-        const __m128 tnz = S4::mul(S4::sub(S4::load(b + 8 + nz), oz), S4::set1(v.iz[id]));
-        const __m128 tfx = S4::mul(S4::sub(S4::load(b + 12 - nx), ox), S4::set1(v.fx[id]));
-        const __m128 tfy = S4::mul(S4::sub(S4::load(b + 16 - ny), oy), S4::set1(v.fy[id]));
-        const __m128 tfz = S4::mul(S4::sub(S4::load(b + 20 - nz), oz), S4::set1(v.fz[id]));
-        const __m128 tn = S4::max(tnz, S4::max(tny, S4::max(tnx, S4::set1(v.tmin[id]))));
-        const __m128 tf = S4::min(tfz, S4::min(tfy, S4::min(tfx, S4::set1(v.hits[id].t))));
-        const __m128 enter = S4::le(tn, tf);
-        dsum = S4::add(dsum, S4::and_(tn, enter));
-        const int mk = S4::mask(enter);
-        // Branch-free push (App. C.1): the id goes onto every lane, the heads of the entered
-        // lanes advance. On the task's own lane the write lands at or below the slot just read.
-        lane[0][h[0]] = id, lane[1][h[1]] = id, lane[2][h[2]] = id, lane[3][h[3]] = id;
-        if constexpr (P::enabled)
-          for (int c = 0; c < 4; ++c)
-            if (mk >> c & 1) probe.write(&lane[c][h[c]], sizeof(uint16_t));
-        h[0] += mk & 1, h[1] += mk >> 1 & 1, h[2] += mk >> 2 & 1, h[3] += mk >> 3 & 1;
-      }
-      uint32_t cnt[4];
-      int active = 0;
-      for (int c = 0; c < 4; ++c) {
-        cnt[c] = h[c] - head[c];
-        head[c] = h[c];
-        active |= int(cnt[c] != 0) << c;
+        const uint32_t nx = (oct & 1) * 3 * N, ny = (oct >> 1 & 1) * 3 * N, nz = (oct >> 2 & 1) * 3 * N;
+        const f ox = SN::set1(v.ox[id]), oy = SN::set1(v.oy[id]), oz = SN::set1(v.oz[id]);
+        const f tnx = SN::mul(SN::sub(SN::load(b + nx), ox), SN::set1(v.ix[id]));
+        const f tny = SN::mul(SN::sub(SN::load(b + N + ny), oy), SN::set1(v.iy[id]));
+        const f tnz = SN::mul(SN::sub(SN::load(b + 2 * N + nz), oz), SN::set1(v.iz[id]));
+        const f tfx = SN::mul(SN::sub(SN::load(b + 3 * N - nx), ox), SN::set1(v.fx[id]));
+        const f tfy = SN::mul(SN::sub(SN::load(b + 4 * N - ny), oy), SN::set1(v.fy[id]));
+        const f tfz = SN::mul(SN::sub(SN::load(b + 5 * N - nz), oz), SN::set1(v.fz[id]));
+        const f tn = SN::max(tnz, SN::max(tny, SN::max(tnx, SN::set1(v.tmin[id]))));
+        const f tf = SN::min(tfz, SN::min(tfy, SN::min(tfx, SN::set1(v.hits[id].t))));
+        const f enter = SN::le(tn, tf);
+        dsum = SN::add(dsum, SN::and_(tn, enter));
+        const unsigned mk = unsigned(SN::mask(enter));
+        masks[i] = uint8_t(mk);
+        active |= mk;
       }
       if (!active) continue;
+      // Distribute the rays over the lanes of the children they entered (App. C.1's push, done
+      // per child after the box tests instead of N branch-free stores per ray: a child's ids
+      // are left-packed eight at a time with one byte shuffle). The task's own lane is packed
+      // last and in place: its output never overtakes its input.
+      uint32_t cnt[N] = {};
+      const unsigned own = 1u << t.lane;
+      for (unsigned todo = (active & ~own) | (active & own); todo;) {
+        const unsigned c = (todo & ~own) ? unsigned(std::countr_zero(todo & ~own)) : t.lane;
+        todo &= ~(1u << c);
+        uint16_t* dst = lane[c] + head[c];
+        cnt[c] = pack_lane(list, masks, t.count, c, dst);
+        if constexpr (P::enabled)
+          for (uint32_t j = 0; j < cnt[c]; ++j) probe.write(&dst[j], sizeof(uint16_t));
+        head[c] += cnt[c];
+      }
       if (!(active & (active - 1))) {
         const int c = std::countr_zero(unsigned(active));
         tasks[ntasks] = {nd.ref[c], uint32_t(c), cnt[c]};
@@ -712,12 +783,18 @@ class RayGrid final : public TraverserBase<RayGrid> {
         continue;
       }
       // Several children: the nearest (smallest summed entry distance) is popped first.
-      const __m128 act = _mm_castsi128_ps(
-          _mm_cmpgt_epi32(_mm_setr_epi32(int(cnt[0]), int(cnt[1]), int(cnt[2]), int(cnt[3])), _mm_setzero_si128()));
-      alignas(16) int32_t keys[4];
-      _mm_store_si128(reinterpret_cast<__m128i*>(keys), mbvh_simd::sort4(mbvh_simd::sort_keys4(dsum, act)));
+      alignas(32) int32_t keys[N];
+      if constexpr (N == 4) {
+        const __m128 act = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(cnt)),
+                                                            _mm_setzero_si128()));
+        _mm_store_si128(reinterpret_cast<__m128i*>(keys), mbvh_simd::sort4(mbvh_simd::sort_keys4(dsum, act)));
+      } else {
+        const __m256 act = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+            _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt)), _mm256_setzero_si256()));
+        _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(dsum, act)));
+      }
       for (int j = std::popcount(unsigned(active)) - 1; j >= 0; --j) {
-        const uint32_t c = uint32_t(keys[j]) & 3;
+        const uint32_t c = uint32_t(keys[j]) & (N - 1);
         tasks[ntasks] = {nd.ref[c], c, cnt[c]};
         probe.write(&tasks[ntasks++], sizeof(Task));
         // The farther children wait on the stack: start fetching their node or first block.
@@ -743,7 +820,8 @@ class RayGrid final : public TraverserBase<RayGrid> {
     Scratch& s = *sp;
     Counters c;
     for (uint32_t first = begin; first < end; first += kMaxChunk)
-      run_chunk<K>(s, batch, first, std::min(end, first + kMaxChunk), out, c, probe);
+      if (params_.width == 8) run_chunk<8, K>(s, batch, first, std::min(end, first + kMaxChunk), out, c, probe);
+      else run_chunk<4, K>(s, batch, first, std::min(end, first + kMaxChunk), out, c, probe);
     release(std::move(sp));
     calls_ += 1, rays_ += c.rays, outside_ += c.outside, queues_ += c.queues, full_ += c.full, partial_ += c.partial;
     queued_rays_ += c.queued_rays, skipped_ += c.skipped, fallbacks_ += c.fallbacks;
@@ -751,7 +829,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
     }
   }
 
-  template <TriKernel K, class P>
+  template <int N, TriKernel K, class P>
   void run_chunk(Scratch& s, const RayBatch& batch, uint32_t first, uint32_t last, std::span<Hit> out, Counters& c,
                  P& probe) const {
     const Octree& oct = *oct_;
@@ -778,10 +856,13 @@ class RayGrid final : public TraverserBase<RayGrid> {
       s.moving.resize(mp);
       s.hits.resize(mp);
     }
-    for (auto& l : s.lanes)
-      if (l.size() < size_t(depth_ + 1) * M + 1) l.resize(size_t(depth_ + 1) * M + 1);
-    if (s.tasks.size() < size_t(3) * depth_ + 2) s.tasks.resize(size_t(3) * depth_ + 2);
-    if (s.single.size() < size_t(3) * depth_ + 2) s.single.resize(size_t(3) * depth_ + 2);
+    // Per lane at most one pending task per tree level, each with at most a queue; tasks: N - 1
+    // siblings pending per level; the one-ray stack: mbvh_traverse's (N-1) * depth + N.
+    for (int l = 0; l < N; ++l)
+      if (s.lanes[l].size() < size_t(depth_ + 1) * M + 32) s.lanes[l].resize(size_t(depth_ + 1) * M + 32);
+    if (s.masks.size() < mp + 16) s.masks.resize(mp + 16);
+    if (s.tasks.size() < size_t(N - 1) * depth_ + 2) s.tasks.resize(size_t(N - 1) * depth_ + 2);
+    if (s.single.size() < size_t(N - 1) * depth_ + N + 2) s.single.resize(size_t(N - 1) * depth_ + N + 2);
     c.rays += n;
     if constexpr (P::enabled)
       if (probe.counts) probe.counts->rays += n;
@@ -831,7 +912,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
         if (node == kNone) continue;
         if (node == kFallback) {
           c.fallbacks++;
-          full_traversal<K>(s, w, out[i], probe);
+          full_traversal<N, K>(s, w, out[i], probe);
           continue;
         }
         push(s, oct.nodes[node].leaf, w, i - first, c, probe);
@@ -882,7 +963,8 @@ class RayGrid final : public TraverserBase<RayGrid> {
       const Stream v{b + kOX * mp, b + kOY * mp, b + kOZ * mp, b + kDX * mp, b + kDY * mp, b + kDZ * mp,
                      b + kTmin * mp, reinterpret_cast<const uint32_t*>(b + kId * mp),
                      d + kIX * mp, d + kIY * mp, d + kIZ * mp, d + kFX * mp, d + kFY * mp, d + kFZ * mp,
-                     d + kSX * mp, d + kSY * mp, d + kSZ * mp, d + kTexit * mp, s.meta.data(), s.axis.data(),
+                     d + kSX * mp, d + kSY * mp, d + kSZ * mp, d + kTexit * mp,
+                     d + kPX * mp, d + kPY * mp, d + kPZ * mp, s.meta.data(), s.axis.data(),
                      s.hits.data()};
       if constexpr (P::enabled)
         for (uint32_t k = 0; k < cnt; ++k)
@@ -890,7 +972,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       prepare_stream(v, cnt);
       for (uint32_t k = 0; k < cnt; ++k) v.hits[k] = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
 
-      stream<K>(s, v, cnt, lf.mbvh_root, probe);
+      stream<N, K>(s, v, cnt, lf.mbvh_root, probe);
 
       // Finish or move on (Alg. 5.1, second half of `process`): the hits found here go to the
       // output (a ray's best hit only ever improves), the exits of the whole queue are computed
@@ -918,7 +1000,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
         }
         if (next == kFallback || (rec >> kIdBits) >= kMaxSteps) {
           c.fallbacks++;
-          full_traversal<K>(s, w, out[first + (rec & kIdMask)], probe);
+          full_traversal<N, K>(s, w, out[first + (rec & kIdMask)], probe);
           continue;
         }
         push(s, oct.nodes[next].leaf, w, rec + (1u << kIdBits), c, probe);
@@ -929,7 +1011,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
 
   SchemeConfig cfg_;
   OctreeParams params_;
-  int m_ = 384;
+  int m_ = 768;
   uint32_t feed_ = kMaxChunk;  // rays fed per slice (default: all of them before processing, Alg. 5.1)
   uint32_t depth_ = 1;
   std::shared_ptr<const Octree> oct_;
