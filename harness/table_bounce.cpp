@@ -60,10 +60,12 @@ int bounce_table(const TableOptions& opt) {
     const SchemeInfo& info = find_scheme(name);
     SchemeConfig cfg = opt.run.scheme_config;
     if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
+    const std::string layout = thesis_layout(name, cfg);
     auto t = info.make(cfg);
     t->prepare(bench.scene(), bench.cache());
     for (size_t depth = 0; depth < workloads.size(); ++depth) {
       Record r = measure_cell(bench, table_spec(opt, workloads[depth]), *t, run);
+      r.set("layout", layout);
       const std::string dcol = "depth" + std::to_string(depth);
       r.set("depth", uint64_t(depth));
       if (info.baseline) r.set("rays_per_node", "").set("rays_per_leaf", "");  // Embree cannot be instrumented
@@ -109,7 +111,7 @@ int bounce_table(const TableOptions& opt) {
   write_csv(opt.csv, records,
             {{"command", "table bounce"}, {"scene", scene_arg}, {"thesis_scene", tscene}, {"seed", opt.run.seed}});
   print_table(records,
-              {"scheme", "workload", "mrays_median", "thesis_mrays", "vs_single", "thesis_vs_single", "rays_per_node",
+              {"scheme", "layout", "workload", "mrays_median", "thesis_mrays", "vs_single", "thesis_vs_single", "rays_per_node",
                "thesis_rays_per_node", "rays_per_leaf", "thesis_rays_per_leaf", "mismatch_rate"},
               stdout);
   return 0;

@@ -88,12 +88,13 @@ int raygrid_table(const TableOptions& opt) {
     const SchemeInfo& info = find_scheme(name);
     SchemeConfig cfg = base;
     if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
+    const std::string layout = thesis_layout(name, cfg);
     auto t = info.make(cfg);
     t->prepare(bench.scene(), bench.cache());
     for (int k = 1; k <= 4; ++k) {
       raygrid_reset_stats(*t);
       Record r = measure_cell(bench, table_spec(opt, "bounce:" + std::to_string(k)), *t, run);
-      r.set("bounce", k).set("part", "table9");
+      r.set("bounce", k).set("part", "table9").set("layout", layout);
       if (info.baseline) r.set("rays_per_node", "").set("rays_per_leaf", "");  // Embree cannot be instrumented
       const std::string ts = thesis_scheme9(name);
       r.set("thesis_scene", tscene).set("thesis_scheme", ts);
@@ -150,12 +151,13 @@ int raygrid_table(const TableOptions& opt) {
         SchemeConfig cfg = base;
         cfg.params["queue"] = std::to_string(m);
         cfg.params["leaf_prims"] = std::to_string(leaf_prims);
+        const std::string layout = thesis_layout("raygrid", cfg);
         auto t = make_scheme("raygrid", cfg);
         t->prepare(bench.scene(), bench.cache());
         RunOptions sr = run;
         sr.scheme_config = cfg;
         Record r = measure_cell(bench, spec, *t, sr);
-        r.set("bounce", 3).set("part", "sweep");
+        r.set("bounce", 3).set("part", "sweep").set("layout", layout);
         if (single > 0) r.set("pct_over_single", fmt(100.0 * (std::stod(*r.get("mrays_median")) / single - 1.0)));
         else r.set("pct_over_single", "");
         raygrid_columns(r, *t);
@@ -175,7 +177,7 @@ int raygrid_table(const TableOptions& opt) {
                       "Modern Room only; thesis_mrays: Table 9, 1 core of a 3.8 GHz Xeon (2012)"}});
   const std::vector<Record> main(records.begin(), records.begin() + long(main_rows));
   print_table(main,
-              {"scheme", "workload", "mrays_median", "pct_over_single", "thesis_mrays", "thesis_pct_over_single",
+              {"scheme", "layout", "workload", "mrays_median", "pct_over_single", "thesis_mrays", "thesis_pct_over_single",
                "rays_per_node", "thesis_rays_per_node", "rays_per_leaf", "thesis_rays_per_leaf", "mismatch_rate"},
               stdout);
   if (sweep) {

@@ -30,6 +30,17 @@ std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<st
   return all;
 }
 
+std::string thesis_layout(const std::string& scheme, SchemeConfig& cfg) {
+  if (scheme != "mbvh_rs" && scheme != "raygrid") return "";
+  if (!cfg.params.count("width")) {
+    cfg.params["width"] = "4";
+    if (scheme == "raygrid" && !cfg.params.count("queue")) cfg.params["queue"] = "384";
+  }
+  std::string label = "width=" + cfg.params["width"];
+  if (scheme == "raygrid" && cfg.params.count("queue")) label += " queue=" + cfg.params["queue"];
+  return label;
+}
+
 WorkloadSpec table_spec(const TableOptions& opt, const std::string& workload, uint32_t view) {
   WorkloadSpec spec = parse_workload(workload);
   spec.width = opt.run.width;

@@ -329,6 +329,35 @@ struct TriRay {
   }
 };
 
+// The sheared edge functions of intersect_watertight on S::f lanes (S: an mbvh_simd::V<W> or
+// any type with the same operations): the same float operations in the same order per lane, and
+// lanes where an edge passes (numerically) through the ray decided in double, so that the two
+// triangles sharing the edge agree (Woop et al. 2013 §4). Shared by every SIMD copy of the kernel
+// over MBVH blocks (block_intersect here, the stream kernel of traversal/mbvh_stream.h).
+template <class S>
+inline void edge_functions(typename S::f Ax, typename S::f Ay, typename S::f Bx, typename S::f By, typename S::f Cx,
+                           typename S::f Cy, typename S::f& U, typename S::f& V, typename S::f& Wf) {
+  using f = typename S::f;
+  constexpr int L = sizeof(f) / sizeof(float);
+  U = S::sub(S::mul(Cx, By), S::mul(Cy, Bx));
+  V = S::sub(S::mul(Ax, Cy), S::mul(Ay, Cx));
+  Wf = S::sub(S::mul(Bx, Ay), S::mul(By, Ax));
+  const f z = S::zero();
+  const int zmask = S::mask(S::or_(S::or_(S::eq(U, z), S::eq(V, z)), S::eq(Wf, z)));
+  if (zmask) [[unlikely]] {
+    alignas(32) float ax[L], ay[L], bx[L], by[L], cx[L], cy[L], u[L], v[L], w[L];
+    S::store(ax, Ax), S::store(ay, Ay), S::store(bx, Bx), S::store(by, By), S::store(cx, Cx), S::store(cy, Cy);
+    S::store(u, U), S::store(v, V), S::store(w, Wf);
+    for (int m = zmask; m; m &= m - 1) {
+      const int l = std::countr_zero(unsigned(m));
+      u[l] = float(double(cx[l]) * by[l] - double(cy[l]) * bx[l]);
+      v[l] = float(double(ax[l]) * cy[l] - double(ay[l]) * cx[l]);
+      w[l] = float(double(bx[l]) * ay[l] - double(by[l]) * ax[l]);
+    }
+    U = S::load(u), V = S::load(v), Wf = S::load(w);
+  }
+}
+
 // The watertight test of intersect_watertight on W triangles at once: the same float
 // operations in the same order per lane, so its watertightness carries over. On a hit with
 // tmin <= t < hit.t records the closest (the first lane on ties, as a scalar loop would) and
@@ -346,25 +375,9 @@ template <int W>
   const f By = S::sub(S::sub(S::load(b.v[1][r.ky]), r.oy), S::mul(r.sy, Bz));
   const f Cx = S::sub(S::sub(S::load(b.v[2][r.kx]), r.ox), S::mul(r.sx, Cz));
   const f Cy = S::sub(S::sub(S::load(b.v[2][r.ky]), r.oy), S::mul(r.sy, Cz));
-  f U = S::sub(S::mul(Cx, By), S::mul(Cy, Bx));
-  f Vv = S::sub(S::mul(Ax, Cy), S::mul(Ay, Cx));
-  f Ww = S::sub(S::mul(Bx, Ay), S::mul(By, Ax));
+  f U, Vv, Ww;
+  edge_functions<S>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww);
   const f z = S::zero();
-  const int zmask = S::mask(S::or_(S::or_(S::eq(U, z), S::eq(Vv, z)), S::eq(Ww, z)));
-  if (zmask) [[unlikely]] {
-    // An edge passes (numerically) through the ray: as in intersect_watertight, decide those
-    // lanes in double so that the two triangles sharing the edge agree (Woop et al. §4).
-    alignas(32) float ax[W], ay[W], bx[W], by[W], cx[W], cy[W], u[W], v[W], w[W];
-    S::store(ax, Ax), S::store(ay, Ay), S::store(bx, Bx), S::store(by, By), S::store(cx, Cx), S::store(cy, Cy);
-    S::store(u, U), S::store(v, Vv), S::store(w, Ww);
-    for (int m = zmask; m; m &= m - 1) {
-      const int l = std::countr_zero(unsigned(m));
-      u[l] = float(double(cx[l]) * by[l] - double(cy[l]) * bx[l]);
-      v[l] = float(double(ax[l]) * cy[l] - double(ay[l]) * cx[l]);
-      w[l] = float(double(bx[l]) * ay[l] - double(by[l]) * ax[l]);
-    }
-    U = S::load(u), Vv = S::load(v), Ww = S::load(w);
-  }
   // (U < 0 || V < 0 || W < 0) && (U > 0 || V > 0 || W > 0), as min < 0 and max > 0 (no NaN
   // can occur: vertices and origin are finite).
   const f neg = S::lt(S::min(S::min(U, Vv), Ww), z);
@@ -478,6 +491,20 @@ struct MBVHStackEntry {
   float dist;  // entry distance: popped entries at or beyond the closest hit are skipped
 };
 
+// Pops the nearest pending child that may still hold a closer hit than `tfar` into `cur`
+// (entries beyond it are dropped); false when the stack runs empty.
+template <class P>
+inline bool pop_pending(const MBVHStackEntry* stack, uint32_t& sp, float tfar, uint32_t& cur, P& probe) {
+  for (;;) {
+    if (sp == 0) return false;
+    --sp;
+    probe.read(&stack[sp], sizeof(MBVHStackEntry));
+    if (stack[sp].dist < tfar) break;
+  }
+  cur = stack[sp].ref;
+  return true;
+}
+
 // Lane i of a vector, without a round trip through memory.
 namespace mbvh_simd {
 inline float lane(__m128 v, uint32_t i) {
@@ -574,22 +601,15 @@ inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const Node
       leaf_test<N, W, K>(m, ts, tr, rc, cur, hit);
       tfar = hit.t;
     }
-    // Pop the nearest pending child that may still hold a closer hit.
-    for (;;) {
-      if (sp == 0) return;
-      --sp;
-      probe.read(&stack[sp], sizeof(MBVHStackEntry));
-      if (stack[sp].dist < tfar) break;
-    }
-    cur = stack[sp].ref;
+    if (!pop_pending(stack, sp, tfar, cur, probe)) return;
   }
 }
 
-// Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
-template <int N, int W, TriKernel K, class P>
-void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
-                     P& probe) {
-  const MBVH<N, W>& m = *d.mbvh;
+// The per-ray loop of the single-ray MBVH schemes: sets up each ray of `range` and hands it to
+// `traverse(nr, tr, rc, hit, stack)`.
+template <int N, int W, class P, class F>
+void mbvh_for_each_ray(const MBVH<N, W>& m, const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe,
+                       F&& traverse) {
   std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
   for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
     const Ray& ray = batch.rays[i];
@@ -600,10 +620,21 @@ void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange
     const NodeRay<N> nr(rc, ray.tmin);
     const TriRay<W> tr(rc, ray.tmin);
     Hit hit = initial_hit(ray);
-    mbvh_traverse<N, W, K>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack.data(), probe);
+    traverse(nr, tr, rc, hit, stack.data());
     hits[i] = finish_hit(hit);
     probe.write(&hits[i], sizeof(Hit));
   }
+}
+
+// Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
+template <int N, int W, TriKernel K, class P>
+void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
+                     P& probe) {
+  const MBVH<N, W>& m = *d.mbvh;
+  mbvh_for_each_ray(m, batch, range, hits, probe,
+                    [&](const NodeRay<N>& nr, const TriRay<W>& tr, const RayCtx& rc, Hit& hit, MBVHStackEntry* stack) {
+                      mbvh_traverse<N, W, K>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
+                    });
 }
 
 }  // namespace tb

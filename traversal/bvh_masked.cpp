@@ -64,17 +64,18 @@ class BVHMasked final : public TraverserBase<BVHMasked> {
   }
 
   template <bool kCommon, class P>
-  static uint32_t test_group(const Packet& pk, uint32_t g, const BVHNode& n, P& probe) {
+  static uint32_t test_group(const Packet& pk, uint32_t g, const NodeTester<kCommon>& box, P& probe) {
     probe.read(&pk.rg[g], sizeof(RayGroup));
-    return group_box<kCommon>(pk, g, n);
+    return box(g);
   }
 
   // Re-tests the lanes of `m` against node n with the current closest hits; false when none is left.
   template <bool kCommon, class P>
   static bool retest(const Packet& pk, const BVHNode& n, uint8_t* m, P& probe) {
     uint32_t any = 0;
+    const NodeTester<kCommon> box(pk, n);
     for (uint32_t g = 0; g < pk.groups; ++g)
-      if (m[g]) any |= m[g] = uint8_t(m[g] & test_group<kCommon>(pk, g, n, probe));
+      if (m[g]) any |= m[g] = uint8_t(m[g] & test_group<kCommon>(pk, g, box, probe));
     return any != 0;
   }
 
@@ -99,11 +100,12 @@ class BVHMasked final : public TraverserBase<BVHMasked> {
           const BVHNode* c = &nodes[nd.left_first];
           probe.read(c, 2 * sizeof(BVHNode));  // both children's boxes are tested
           uint32_t anyl = 0, anyr = 0;
+          const NodeTester<kCommon> box0(pk, c[0]), box1(pk, c[1]);
           for (uint32_t g = 0; g < pk.groups; ++g) {
             ml[g] = mr[g] = 0;
             if (!cur[g]) continue;
-            anyl |= ml[g] = uint8_t(cur[g] & test_group<kCommon>(pk, g, c[0], probe));
-            anyr |= mr[g] = uint8_t(cur[g] & test_group<kCommon>(pk, g, c[1], probe));
+            anyl |= ml[g] = uint8_t(cur[g] & test_group<kCommon>(pk, g, box0, probe));
+            anyr |= mr[g] = uint8_t(cur[g] & test_group<kCommon>(pk, g, box1, probe));
           }
           if (anyl && anyr) {
             const bool rf = right_first(c, pk.mean_dir);

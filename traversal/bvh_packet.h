@@ -217,6 +217,13 @@ struct Packet {
   Frustum frustum;             // valid only for common-origin packets narrow enough to bound
   TriCull cull;                // valid with the frustum; split planes only with `split_planes`
   bool split_planes = false;   // §3.3 sub-frusta of a full 16x16 primary packet
+  int8_t psign = -1;           // the direction sign bits every group shares (as gsign), else -1
+  uint32_t sheared = 0;        // bit g: tg[g]'s watertight shear is computed (compute_shear)
+  // Lazy frustum: build_frusta runs when the first node is not culled by the cheaper tests
+  // (frustum_culls), so a packet that misses the scene after a root test or two (most packets
+  // around a single object such as bunny) never pays for the plane fit (~50 instructions/ray).
+  bool frustum_pending = false;
+  bool frustum_split = false;  // build_frusta's `split` for the pending build
 
   void update_tfar_max() {
     __m256 m = rg[0].tfar;
@@ -273,6 +280,44 @@ inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n) {
   return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
 }
 
+// group_box with the node's work hoisted out of the per-group loop: when every group of a
+// common-origin packet shares its direction signs (primary packets away from the axis planes),
+// the near/far plane offsets (plane - org) are the same scalars for every group, so they are
+// broadcast once per node and each group test is 6 multiplies, 6 min/max and a compare. The
+// values are exactly group_box's (same scalar subtraction, same operation order).
+template <bool kCommon>
+struct NodeTester {
+  const Packet& p;
+  const BVHNode& n;
+  bool pre = false;
+  __m256 xn[3], xf[3];
+  NodeTester(const Packet& pk, const BVHNode& nd) : p(pk), n(nd) {
+    if constexpr (kCommon) {
+      if (p.psign >= 0) {
+        pre = true;
+        const float* lo = &n.lo.x;
+        const float* hi = &n.hi.x;
+        for (int a = 0; a < 3; ++a) {
+          const bool neg = (p.psign >> a) & 1;
+          xn[a] = _mm256_set1_ps((neg ? hi[a] : lo[a]) - p.org[a]);
+          xf[a] = _mm256_set1_ps((neg ? lo[a] : hi[a]) - p.org[a]);
+        }
+      }
+    }
+  }
+  uint32_t operator()(uint32_t g) const {
+    if (!pre) return group_box<kCommon>(p, g, n);
+    const RayGroup& G = p.rg[g];
+    const __m256 pad = _mm256_set1_ps(kFarPad);
+    __m256 tn = G.tmin, tf = G.tfar;
+    for (int a = 0; a < 3; ++a) {
+      tn = _mm256_max_ps(_mm256_mul_ps(xn[a], G.inv[a]), tn);
+      tf = _mm256_min_ps(_mm256_mul_ps(_mm256_mul_ps(xf[a], G.inv[a]), pad), tf);
+    }
+    return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
+  }
+};
+
 // r[k][l] <- r[l][k]: eight 32-byte rays (org, tmin, dir, tmax) become eight SoA vectors.
 inline void transpose8(__m256 r[8]) {
   const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
@@ -307,7 +352,7 @@ void load_packet(Packet& p, const Ray* rays, uint32_t n, P& probe) {
   p.n = n;
   p.groups = (n + kW - 1) / kW;
   const __m256 inf = _mm256_set1_ps(INFINITY), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
-  const __m256 sign = _mm256_set1_ps(-0.f), absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
   __m256 omin[3], omax[3], rmin[3], rmax[3], md[3];
   for (int a = 0; a < 3; ++a) omin[a] = rmin[a] = inf, omax[a] = rmax[a] = _mm256_sub_ps(zero, inf), md[a] = zero;
   __m256 tmin_min = inf;
@@ -346,28 +391,6 @@ void load_packet(Packet& p, const Ray* rays, uint32_t n, P& probe) {
     G.tmin = v[3];
     G.tfar = _mm256_blendv_ps(_mm256_sub_ps(zero, inf), v[7], lane_mask_ps(real));
     tmin_min = _mm256_min_ps(tmin_min, v[3]);
-    // Dominant axis exactly as RayCtx chooses it; kx = kz+1, ky = kz+2 (mod 3) without RayCtx's
-    // winding swap: a swap only negates all three edge functions, which the sign test and
-    // u = V/det, v = W/det do not see.
-    const __m256 ax = _mm256_and_ps(d[0], absmask), ay = _mm256_and_ps(d[1], absmask), az = _mm256_and_ps(d[2], absmask);
-    const __m256 xy = _mm256_cmp_ps(ax, ay, _CMP_GE_OQ);
-    const __m256 m0 = _mm256_and_ps(xy, _mm256_cmp_ps(ax, az, _CMP_GE_OQ));
-    const __m256 m1 = _mm256_andnot_ps(xy, _mm256_cmp_ps(ay, az, _CMP_GE_OQ));
-    const __m256 m2 = _mm256_andnot_ps(_mm256_or_ps(m0, m1), _mm256_castsi256_ps(_mm256_set1_epi32(-1)));
-    const __m256 dkz = _mm256_blendv_ps(_mm256_blendv_ps(d[2], d[1], m1), d[0], m0);
-    const __m256 dkx = _mm256_blendv_ps(_mm256_blendv_ps(d[0], d[2], m1), d[1], m0);
-    const __m256 dky = _mm256_blendv_ps(_mm256_blendv_ps(d[1], d[0], m1), d[2], m0);
-    T.sx = _mm256_div_ps(dkx, dkz);
-    T.sy = _mm256_div_ps(dky, dkz);
-    const __m256 nsx = _mm256_xor_ps(T.sx, sign), nsy = _mm256_xor_ps(T.sy, sign);
-    T.cx[0] = _mm256_blendv_ps(_mm256_and_ps(m0, nsx), one, m2);
-    T.cx[1] = _mm256_blendv_ps(_mm256_and_ps(m1, nsx), one, m0);
-    T.cx[2] = _mm256_blendv_ps(_mm256_and_ps(m2, nsx), one, m1);
-    T.cy[0] = _mm256_blendv_ps(_mm256_and_ps(m0, nsy), one, m1);
-    T.cy[1] = _mm256_blendv_ps(_mm256_and_ps(m1, nsy), one, m2);
-    T.cy[2] = _mm256_blendv_ps(_mm256_and_ps(m2, nsy), one, m0);
-    const int k0 = _mm256_movemask_ps(m0), k1 = _mm256_movemask_ps(m1), k2 = _mm256_movemask_ps(m2);
-    T.kz = k0 == 0xFF ? 0 : k1 == 0xFF ? 1 : k2 == 0xFF ? 2 : -1;
     p.hg[g].prim = _mm256_set1_epi32(int(kNoHit));
     p.hg[g].u = p.hg[g].v = zero;
     probe.write(&G, sizeof(RayGroup));
@@ -381,6 +404,11 @@ void load_packet(Packet& p, const Ray* rays, uint32_t n, P& probe) {
   }
   p.common_origin = same_org == 0xFF;
   p.org = rays[0].org;
+  p.sheared = 0;
+  p.frustum_pending = false;
+  p.psign = p.gsign[0];
+  for (uint32_t g = 1; g < p.groups; ++g)
+    if (p.gsign[g] != p.psign) p.psign = -1;
   alignas(16) float neg[4], usable[4], lo[4], hi[4], r0[4], r1[4];
   for (int a = 0; a < 3; ++a) {
     const bool all_neg = allneg[a] == 0xFF, all_pos = anyneg[a] == 0;
@@ -413,7 +441,8 @@ void load_packet(Packet& p, const Ray* rays, uint32_t n, P& probe) {
 // any ray order, not only for the Fig. 16 layout the corner indices assume.
 struct FitCtx {
   Vec3 c;
-  __m256 cd[kMaxGroups];  // c.d per lane
+  __m256 cd[kMaxGroups];   // c.d per lane
+  __m256 rcd[kMaxGroups];  // 1 / c.d: the tilt estimate only needs to be close, a check verifies it
 };
 
 // The packet's centre direction; false when some ray is more than ~75 degrees from it (cos <
@@ -436,6 +465,7 @@ inline bool fit_centre(const Packet& p, const uint32_t* corners, FitCtx& fc) {
   for (uint32_t g = 0; g < p.groups; ++g) {
     const __m256* d = p.tg[g].d;
     fc.cd[g] = add(add(mul(cx, d[0]), mul(cy, d[1])), mul(cz, d[2]));
+    fc.rcd[g] = _mm256_div_ps(_mm256_set1_ps(1.f), fc.cd[g]);
     const __m256 dd = add(add(mul(d[0], d[0]), mul(d[1], d[1])), mul(d[2], d[2]));
     ok &= _mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(fc.cd[g], zero, _CMP_GT_OQ),
                                            _mm256_cmp_ps(mul(fc.cd[g], fc.cd[g]), mul(_mm256_set1_ps(0.0625f), dd),
@@ -467,17 +497,18 @@ inline bool fit_plane(const Packet& p, uint32_t gmask, const FitCtx& fc, Vec3 m,
       fail |= _mm256_movemask_ps(bad);
       if (with_need)
         need = _mm256_max_ps(
-            need, _mm256_and_ps(bad, _mm256_div_ps(_mm256_sub_ps(mul(_mm256_set1_ps(4e-6f), mag), sdot), fc.cd[g])));
+            need, _mm256_and_ps(bad, mul(_mm256_sub_ps(mul(_mm256_set1_ps(4e-6f), mag), sdot), fc.rcd[g])));
     }
     need_out = Packet::hmax8(need);
     return fail == 0;
   };
+  // The tilt each failing ray needs comes with the first check (one pass instead of two): a
+  // corner-ray plane of a pinhole packet contains its edge rays, so it never verifies untilted.
   float need = 0.f;
-  bool verified = check(m, false, need);
+  bool verified = check(m, true, need);
   for (int iter = 0; iter < 6 && !verified; ++iter) {
-    check(m, true, need);
     m = m + fc.c * (need * 1.5f + 1e-7f);
-    verified = check(m, false, need);
+    verified = check(m, true, need);
   }
   if (verified) out = m;
   return verified;
@@ -570,6 +601,16 @@ inline void build_frusta(Packet& p, bool split) {
   p.cull.oz = _mm256_set1_ps(p.org.z);
 }
 
+// Frustum early miss with the lazy build (Packet::frustum_pending): call only after the cheaper
+// tests failed to decide the node.
+inline bool frustum_culls(Packet& p, const BVHNode& n) {
+  if (p.frustum_pending) {
+    p.frustum_pending = false;
+    build_frusta(p, p.frustum_split);
+  }
+  return p.frustum.valid && frustum_misses_box(p.frustum, n);
+}
+
 // Writes the packet's hits back to the batch's hit array (AoS Hit, finish_hit semantics).
 template <class P>
 void store_hits(const Packet& p, Hit* out, P& probe) {
@@ -637,12 +678,48 @@ inline bool scalar_lane(Packet& p, uint32_t g, uint32_t l, const TriangleSet& ts
   return true;
 }
 
+// The watertight shear of group g (Woop et al. 2013), computed on the group's first triangle test
+// rather than in load_packet: primary packets around a single object (bunny, dragon) mostly miss
+// the scene, and groups that never reach a leaf never need it (5 divisions per group saved).
+// Dominant axis exactly as RayCtx chooses it; kx = kz+1, ky = kz+2 (mod 3) without RayCtx's
+// winding swap: a swap only negates all three edge functions, which the sign test and
+// u = V/det, v = W/det do not see.
+inline void compute_shear(Packet& p, uint32_t g) {
+  TriGroup& T = p.tg[g];
+  const __m256* d = T.d;
+  const __m256 one = _mm256_set1_ps(1.f), sign = _mm256_set1_ps(-0.f);
+  const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  const __m256 ax = _mm256_and_ps(d[0], absmask), ay = _mm256_and_ps(d[1], absmask), az = _mm256_and_ps(d[2], absmask);
+  const __m256 xy = _mm256_cmp_ps(ax, ay, _CMP_GE_OQ);
+  const __m256 m0 = _mm256_and_ps(xy, _mm256_cmp_ps(ax, az, _CMP_GE_OQ));
+  const __m256 m1 = _mm256_andnot_ps(xy, _mm256_cmp_ps(ay, az, _CMP_GE_OQ));
+  const __m256 m2 = _mm256_andnot_ps(_mm256_or_ps(m0, m1), _mm256_castsi256_ps(_mm256_set1_epi32(-1)));
+  const __m256 dkz = _mm256_blendv_ps(_mm256_blendv_ps(d[2], d[1], m1), d[0], m0);
+  const __m256 dkx = _mm256_blendv_ps(_mm256_blendv_ps(d[0], d[2], m1), d[1], m0);
+  const __m256 dky = _mm256_blendv_ps(_mm256_blendv_ps(d[1], d[0], m1), d[2], m0);
+  T.sx = _mm256_div_ps(dkx, dkz);
+  T.sy = _mm256_div_ps(dky, dkz);
+  const int k0 = _mm256_movemask_ps(m0), k1 = _mm256_movemask_ps(m1), k2 = _mm256_movemask_ps(m2);
+  T.kz = k0 == 0xFF ? 0 : k1 == 0xFF ? 1 : k2 == 0xFF ? 2 : -1;
+  if (T.kz < 0) {  // the coefficient form, only for groups whose lanes differ in kz
+    const __m256 nsx = _mm256_xor_ps(T.sx, sign), nsy = _mm256_xor_ps(T.sy, sign);
+    T.cx[0] = _mm256_blendv_ps(_mm256_and_ps(m0, nsx), one, m2);
+    T.cx[1] = _mm256_blendv_ps(_mm256_and_ps(m1, nsx), one, m0);
+    T.cx[2] = _mm256_blendv_ps(_mm256_and_ps(m2, nsx), one, m1);
+    T.cy[0] = _mm256_blendv_ps(_mm256_and_ps(m0, nsy), one, m1);
+    T.cy[1] = _mm256_blendv_ps(_mm256_and_ps(m1, nsy), one, m2);
+    T.cy[2] = _mm256_blendv_ps(_mm256_and_ps(m2, nsy), one, m0);
+  }
+  p.sheared |= 1u << g;
+}
+
 // Watertight (Woop et al. 2013) over 8 lanes. Edge functions as in intersect_watertight:
 // X = A[kx] - sx * A[kz]; groups with mixed kz use the coefficient form cx.A, which evaluates
 // to the identical float (the other terms are exact zeros), so every lane decides exactly as
 // the scalar kernel does. Hit distance as in the scalar kernel (exact_plane_distance).
 template <bool kCommon>
 inline uint32_t tri_watertight(Packet& p, uint32_t g, uint32_t mask, const TriangleSet& ts, uint32_t k) {
+  if (!((p.sheared >> g) & 1u)) [[unlikely]] compute_shear(p, g);
   const TriVerts& tri = ts.verts[k];
   const RayGroup& G = p.rg[g];
   const TriGroup& T = p.tg[g];

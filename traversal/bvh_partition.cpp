@@ -9,7 +9,9 @@
 // exactly the parent's active groups when the far child is popped.
 //
 // As in Alg. 2.7 a node is first tested against the packet's frustum (common origin) or its
-// interval-arithmetic bounds, and skipped when they miss it.
+// interval-arithmetic bounds, and skipped when they miss it. The frustum is fitted lazily, on the
+// first node the IA bounds do not cull (Packet::frustum_pending): primary packets around a single
+// object mostly miss the scene after a root test or two and never need it.
 //
 // Parameters: split=1|0 — after the first intersection (bounce and shadow batches) continue as
 // four sub-packets, Arauna's 8x8 packets (§3.3); default 0, measured (see kDefaultSplit).
@@ -61,7 +63,8 @@ class BVHPartition final : public TraverserBase<BVHPartition> {
         load_packet(pk, &batch.rays[b], e - b, probe);
         if constexpr (P::enabled) if (probe.counts) probe.counts->rays += e - b;
         if (pk.common_origin) {
-          build_frusta(pk, false);
+          pk.frustum_pending = true;  // built on the first node the IA bounds do not decide
+          pk.frustum_split = false;
           traverse<K, true>(pk, s->stack.data(), probe);
         } else {
           traverse<K, false>(pk, s->stack.data(), probe);
@@ -84,13 +87,14 @@ class BVHPartition final : public TraverserBase<BVHPartition> {
       // Alg. 2.7 FindFirst: frustum / interval early miss, then the in-place partition.
       uint32_t active = 0;
       bool culled = ia_misses(pk.ia, nd);
-      if constexpr (kCommon) culled = culled || (pk.frustum.valid && frustum_misses_box(pk.frustum, nd));
+      if constexpr (kCommon) culled = culled || frustum_culls(pk, nd);
       if (!culled) {
+        const NodeTester<kCommon> box(pk, nd);
         for (uint32_t i = 0; i < count; ++i) {
           const uint32_t g = idx[i];
           probe.read(&idx[i], 1);
           probe.read(&pk.rg[g], sizeof(RayGroup));
-          const uint32_t m = group_box<kCommon>(pk, g, nd);
+          const uint32_t m = box(g);
           if (m) {
             lanes[g] = uint8_t(m);
             std::swap(idx[active], idx[i]);

@@ -9,19 +9,22 @@
 //   3. brute-force scan for the first active ray, then from the back for the last one.
 // Leaves test the triangles against the active range, 8 rays at a time, each group masked by its
 // hits on the leaf box. For primary packets the two extra planes of §3.3 split the frustum into
-// four 64-ray quadrants (Fig. 16); a triangle is tested against the packet frustum and the split
-// planes at once (one 8-lane test) and then only against the quadrants it may touch. (On sponza
-// this measured cost-neutral: the leaf-box masks already drop most groups a triangle misses.)
+// four 64-ray quadrants (Fig. 16); a triangle can be tested against the packet frustum and the
+// split planes at once (one 8-lane test) and then only against the quadrants it may touch (off by
+// default: it measured a small loss, the leaf-box masks already drop most groups a triangle
+// misses; see kDefaultTriCull). The frustum itself is fitted lazily, on the first node the IA
+// bounds do not decide (Packet::frustum_pending).
 //
 // Parameters:
 //   split=1|0   after the first intersection (bounce and shadow batches) continue as four
 //               sub-packets, as Arauna does with its 8x8 packets (§3.3). Default 0, measured
 //               (see kDefaultSplit).
-//   subfrusta=1|0  the two §3.3 split planes (default 1); tricull=N  test leaf triangles against
-//               the packet frustum and split planes when at least N groups of 8 rays are active
-//               (default 2, 0 = never); leafmask=1|0  test each group of the range against the
-//               leaf box before its triangles (default 1); last=1|0  keep the last active ray
-//               too, not just the first (default 1).
+//   subfrusta=1|0  the two §3.3 split planes (default 1, used only with tricull > 0);
+//               tricull=N  test leaf triangles against the packet frustum and split planes when
+//               at least N groups of 8 rays are active (default 0 = never, measured: see
+//               kDefaultTriCull); leafmask=1|0  test each group of the range against the leaf box
+//               before its triangles (default 1); last=1|0  keep the last active ray too, not
+//               just the first (default 1).
 #include "traversal/bvh_packet.h"
 
 namespace tb {
@@ -36,6 +39,13 @@ using namespace packet;
 // culls occluded nodes — while four sub-packets repeat the descent from the root and the setup.
 constexpr int kDefaultSplit = 0;
 
+// tricull=0 is the default: primary, 512x512, 1 thread, median of 7, same-run ratios to
+// embree_packet8 (after the lazy frustum and the hoisted node offsets): tricull=2 / 0 / 8 gave
+// bunny 26.5 / 28.4 / 28.9, sponza 21.3 / 21.6 / 21.3, room 24.8 / 25.4 / 26.0, conference 34.7 /
+// 34.3 / 33.5 Mrays/s. The leaf-box masks already drop most groups a triangle misses, so the
+// 8-plane triangle test rarely pays for itself; with tricull=0 the split planes are not fitted.
+constexpr int kDefaultTriCull = 0;
+
 class BVHRanged final : public TraverserBase<BVHRanged> {
  public:
   explicit BVHRanged(const SchemeConfig& cfg)
@@ -43,7 +53,7 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
         params_(bvh_params(cfg)),
         split_(cfg.get_int("split", kDefaultSplit) != 0),
         split_planes_(cfg.get_int("subfrusta", 1) != 0),
-        tricull_(cfg.get_int("tricull", 2)),
+        tricull_(cfg.get_int("tricull", kDefaultTriCull)),
         leafmask_(cfg.get_int("leafmask", 1) != 0),
         track_last_(cfg.get_int("last", 1) != 0) {}
   std::string_view name() const override { return "bvh_ranged"; }
@@ -78,7 +88,8 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
         load_packet(pk, &batch.rays[b], e - b, probe);
         if constexpr (P::enabled) if (probe.counts) probe.counts->rays += e - b;
         if (pk.common_origin) {
-          build_frusta(pk, split_planes_);
+          pk.frustum_pending = true;  // built on the first node the IA bounds do not decide
+          pk.frustum_split = split_planes_ && tricull_ > 0;  // the split planes only cull triangles
           traverse<K, true>(pk, s->stack.data(), probe);
         } else {
           traverse<K, false>(pk, s->stack.data(), probe);
@@ -89,24 +100,24 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
   }
 
   template <bool kCommon, class P>
-  static uint32_t test_group(const Packet& pk, uint32_t g, const BVHNode& n, P& probe) {
+  static uint32_t test_group(const Packet& pk, uint32_t g, const NodeTester<kCommon>& box, P& probe) {
     probe.read(&pk.rg[g], sizeof(RayGroup));
-    return group_box<kCommon>(pk, g, n);
+    return box(g);
   }
 
   // Alg. 2.6 FindFirst, over groups: the first ray of [first, last] that hits n, or kNone.
   // `found_mask` receives the hit lanes of the group holding that ray.
   template <bool kCommon, class P>
-  static uint32_t find_first(const Packet& pk, const BVHNode& n, uint32_t first, uint32_t last, uint32_t& found_mask,
-                             P& probe) {
+  static uint32_t find_first(Packet& pk, const BVHNode& n, const NodeTester<kCommon>& box, uint32_t first,
+                             uint32_t last, uint32_t& found_mask, P& probe) {
     const uint32_t g0 = first / kW, g1 = last / kW;
-    uint32_t m = test_group<kCommon>(pk, g0, n, probe) & range_mask(g0, first, last);
+    uint32_t m = test_group<kCommon>(pk, g0, box, probe) & range_mask(g0, first, last);
     if (m) return found_mask = m, g0 * kW + std::countr_zero(m);  // 1. early hit
     if (ia_misses(pk.ia, n)) return kNone;                        // 2. early miss
     if constexpr (kCommon)
-      if (pk.frustum.valid && frustum_misses_box(pk.frustum, n)) return kNone;
+      if (frustum_culls(pk, n)) return kNone;
     for (uint32_t g = g0 + 1; g <= g1; ++g) {                      // 3. scan
-      m = test_group<kCommon>(pk, g, n, probe) & range_mask(g, first, last);
+      m = test_group<kCommon>(pk, g, box, probe) & range_mask(g, first, last);
       if (m) return found_mask = m, g * kW + std::countr_zero(m);
     }
     return kNone;
@@ -115,11 +126,11 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
   // The last ray of [first, last] that hits n, scanning from the back (Overbeck et al. 2008 keep
   // both ends of the range); `first` is known to hit, with `first_mask` its group's lanes.
   template <bool kCommon, class P>
-  static uint32_t find_last(const Packet& pk, const BVHNode& n, uint32_t first, uint32_t last, uint32_t first_mask,
-                            P& probe) {
+  static uint32_t find_last(const Packet& pk, const NodeTester<kCommon>& box, uint32_t first, uint32_t last,
+                            uint32_t first_mask, P& probe) {
     const uint32_t g0 = first / kW;
     for (uint32_t g = last / kW; g > g0; --g) {
-      const uint32_t m = test_group<kCommon>(pk, g, n, probe) & range_mask(g, first, last);
+      const uint32_t m = test_group<kCommon>(pk, g, box, probe) & range_mask(g, first, last);
       if (m) return g * kW + 31 - std::countl_zero(m);
     }
     return g0 * kW + 31 - std::countl_zero(first_mask);
@@ -132,9 +143,10 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
     for (;;) {
       const BVHNode& nd = nodes[node];
       uint32_t fmask = 0;
-      const uint32_t f = find_first<kCommon>(pk, nd, first, last, fmask, probe);
+      const NodeTester<kCommon> box(pk, nd);
+      const uint32_t f = find_first<kCommon>(pk, nd, box, first, last, fmask, probe);
       if (f != kNone) {
-        const uint32_t l = track_last_ ? find_last<kCommon>(pk, nd, f, last, fmask, probe) : last;
+        const uint32_t l = track_last_ ? find_last<kCommon>(pk, box, f, last, fmask, probe) : last;
         if (!nd.is_leaf()) {
           probe.node(&nd, sizeof(BVHNode), l - f + 1);
           probe.read(&nodes[nd.left_first], 2 * sizeof(BVHNode));  // children, for the order
@@ -146,7 +158,7 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
           continue;
         }
         probe.leaf(&nd, sizeof(BVHNode), l - f + 1);
-        intersect_leaf<K, kCommon>(pk, nd, f, l, fmask, probe);
+        intersect_leaf<K, kCommon>(pk, nd, box, f, l, fmask, probe);
       } else {
         probe.read(&nd, sizeof(BVHNode));  // fetched to be culled: not a visit, still a read
       }
@@ -158,7 +170,8 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
   }
 
   template <TriKernel K, bool kCommon, class P>
-  void intersect_leaf(Packet& pk, const BVHNode& nd, uint32_t f, uint32_t l, uint32_t fmask, P& probe) const {
+  void intersect_leaf(Packet& pk, const BVHNode& nd, const NodeTester<kCommon>& box, uint32_t f, uint32_t l,
+                      uint32_t fmask, P& probe) const {
     const TriangleSet& ts = *data_.tris;
     const uint32_t g0 = f / kW, g1 = l / kW;
     uint32_t lanes[kMaxGroups];
@@ -166,7 +179,7 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
       lanes[g] = range_mask(g, f, l);
       // The first group's hit lanes are known from FindFirst; the others cost one box test each,
       // far less than testing their rays against every triangle of the leaf.
-      if (leafmask_) lanes[g] &= g == g0 ? fmask : test_group<kCommon>(pk, g, nd, probe);
+      if (leafmask_) lanes[g] &= g == g0 ? fmask : test_group<kCommon>(pk, g, box, probe);
     }
     // §3.3: each triangle is first tested against the packet frustum and the two split planes
     // (one 8-lane test), and only the quadrants it may touch are tested. The test costs about

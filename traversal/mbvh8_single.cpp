@@ -1,15 +1,18 @@
 // mbvh8_single: the 8-wide variant of the thesis' MBVH baseline for AVX2 (N = SIMD width, §2.2
 // "MBVH traversal"): eight child boxes per AVX2 slab operation, children ordered near-to-far
-// (one hit: enter; two: compare; more: an 8-element bitonic network on distance keys with the
-// child index in the low bits, the 8-wide equivalent of Alg. 2.10), a stack of (child, entry
+// (an 8-element bitonic network on distance keys with the child index in the low bits, the
+// 8-wide equivalent of Alg. 2.10, for every node whatever the number of entered children), a stack of (child, entry
 // distance) with culling of popped children beyond the closest hit, and leaves stored as SoA
 // blocks of triangles for the SIMD watertight test.
 // The tree is collapsed SAH-optimally (dynamic programming, Ylitie et al. 2017) rather than by
 // the thesis' greedy rule: nodes fill 6-7 of 8 slots instead of ~4.4, for 3-12% more rays/s on
 // sponza, conference and sibenik_lucy (bounce:2); leaves of up to 16 triangles (two blocks).
 // Parameters: tri_width=4|8 (SSE or AVX2 triangle blocks), collapse=sah|greedy, merge (largest
-// leaf), tri_cost (block test vs node visit, %), leaf_size and bins (binary BVH).
-#include "structures/mbvh.h"
+// leaf), tri_cost (block test vs node visit, %), small (0 | 4: 4-wide blocks for leaves of <= 4
+// triangles; default 0), leaf_size and bins (binary BVH).
+// The watertight 8-wide case runs traversal/mbvh8_traverse.h (child ordering without branching on
+// the number of entered children); the other kernels and tri_width=4 run mbvh.h's mbvh_traverse.
+#include "traversal/mbvh8_traverse.h"
 
 namespace tb {
 namespace {
@@ -19,6 +22,10 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
   explicit MBVH8Single(const SchemeConfig& cfg)
       : cfg_(cfg), tri_width_(cfg.get_int("tri_width", 8)), params_(mbvh_params(cfg, 4, 16, true)) {
     if (tri_width_ != 4 && tri_width_ != 8) throw InputError("parameter tri_width must be 4 or 8");
+    // Every leaf in 8-wide blocks by default (small=0): one leaf path instead of a branch between
+    // 4- and 8-wide blocks that mispredicts; +3 to +8% on bunny, dragon, buddha and lucy (bounce:2),
+    // within noise on the architectural scenes, for ~15% more triangle bytes.
+    if (!cfg.params.count("small")) params_.small = 0;
   }
   std::string_view name() const override { return "mbvh8_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
@@ -36,6 +43,7 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     dispatch_kernel(cfg_.kernel, [&](auto k) {
       if (tri_width_ == 4) mbvh_trace_rays<8, 4, decltype(k)::value>(data4_, batch, range, hits, probe);
+      else if constexpr (decltype(k)::value == TriKernel::watertight) mbvh8_trace_rays(data8_, batch, range, hits, probe);
       else mbvh_trace_rays<8, 8, decltype(k)::value>(data8_, batch, range, hits, probe);
     });
   }

@@ -15,8 +15,8 @@
 //      "intersect the rays with the boundary planes of an octree node using SIMD code");
 //   2. the rays traverse the leaf's mini-MBVH as one MBVH/RS stream (Tsakok 2009, thesis Alg.
 //      2.9: task stack, one active-ray stack per SIMD lane, children ordered by summed entry
-//      distance, one-ray streams finishing with ordinary single-ray traversal); a leaf's rays are
-//      tested two per AVX2 pass (pair_intersect);
+//      distance, one-ray streams finishing with ordinary single-ray traversal; a leaf's rays are
+//      tested two per AVX2 pass) — the kernel of traversal/mbvh_stream.h, shared with mbvh_rs;
 //   3. hits found go to the output; the exit distance and face of every ray are computed in SIMD;
 //      a ray whose closest hit so far lies inside the leaf (t <= exit distance) is finished, the
 //      others leave through the exit face's neighbour link and descend to the leaf containing
@@ -54,6 +54,7 @@
 #include <mutex>
 
 #include "structures/octree.h"
+#include "traversal/mbvh_stream.h"
 #include "traversal/raygrid_stats.h"
 
 namespace tb {
@@ -89,12 +90,6 @@ constexpr uint32_t kMaxChunk = 1u << kIdBits;
 // watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
 enum Derived : uint32_t { kIX, kIY, kIZ, kFX, kFY, kFZ, kSX, kSY, kSZ, kTexit, kPX, kPY, kPZ, kDerived };
 
-struct Task {
-  uint32_t ref;    // mini-MBVH child reference (interior node or leaf)
-  uint32_t lane;   // the active-ray stack holding its rays
-  uint32_t count;  // how many (on top of that stack)
-};
-
 // What the octree walk needs of a ray.
 struct WalkRay {
   Vec3 org, dir, inv;
@@ -116,118 +111,13 @@ inline float walk_entry(const WalkRay& w, const AABB& b) {
   return tn <= tf ? tn : INFINITY;
 }
 
-// Pointers to the SoA arrays of the queue being processed.
-struct Stream {
-  const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
-  const uint32_t* rec;
-  float *ix, *iy, *iz, *fx, *fy, *fz, *sx, *sy, *sz, *texit;
-  float *px, *py, *pz;  // the origin permuted to (kx, ky, kz) for the watertight test
-  uint32_t *meta, *axis;
-  Hit* hits;
+// The queue being processed: the shared stream record (traversal/mbvh_stream.h) over the queue's
+// SoA fields and the derived constants, plus what the octree walk needs.
+struct Stream : mbvh_stream::Rays {
+  const uint32_t* rec;  // the index field
+  float* texit;         // exit distance from the leaf box
+  uint32_t* axis;       // exit axis
 };
-
-// Two rays against one block of four triangles in one AVX2 pass: ray A in the low 128-bit half,
-// ray B in the high half, each half the watertight test of mbvh.h's block_intersect (Woop,
-// Benthin and Wald 2013) with the same float operations in the same order per lane, so every
-// lane decides exactly as the 4-wide test would — watertightness carries over — at half the
-// instructions per ray. MBVH/RS leaf streams hold several rays (Table 10), so pairs are common.
-struct PairRay {
-  __m256 ox, oy, oz, sx, sy, sz;  // origin permuted to (kx, ky, kz) and the shear, per half
-  uint32_t kx[2], ky[2], kz[2];
-  const Stream* v;  // the rest of the two rays' records, read only for candidate hits
-  uint32_t id[2];
-};
-
-inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32_t row_b) {
-  return _mm256_loadu2_m128(b.v[corner][row_b], b.v[corner][row_a]);
-}
-
-inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) {
-  using S = mbvh_simd::V<8>;
-  using f = __m256;
-  const f Az = S::sub(pair_rows(b, 0, r.kz[0], r.kz[1]), r.oz);
-  const f Bz = S::sub(pair_rows(b, 1, r.kz[0], r.kz[1]), r.oz);
-  const f Cz = S::sub(pair_rows(b, 2, r.kz[0], r.kz[1]), r.oz);
-  const f Ax = S::sub(S::sub(pair_rows(b, 0, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Az));
-  const f Ay = S::sub(S::sub(pair_rows(b, 0, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Az));
-  const f Bx = S::sub(S::sub(pair_rows(b, 1, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Bz));
-  const f By = S::sub(S::sub(pair_rows(b, 1, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Bz));
-  const f Cx = S::sub(S::sub(pair_rows(b, 2, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Cz));
-  const f Cy = S::sub(S::sub(pair_rows(b, 2, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Cz));
-  f U = S::sub(S::mul(Cx, By), S::mul(Cy, Bx));
-  f Vv = S::sub(S::mul(Ax, Cy), S::mul(Ay, Cx));
-  f Ww = S::sub(S::mul(Bx, Ay), S::mul(By, Ax));
-  const f z = S::zero();
-  const int zmask = S::mask(S::or_(S::or_(S::eq(U, z), S::eq(Vv, z)), S::eq(Ww, z)));
-  if (zmask) [[unlikely]] {
-    // An edge passes (numerically) through the ray: decide those lanes in double (Woop et al. §4).
-    alignas(32) float ax[8], ay[8], bx[8], by[8], cx[8], cy[8], u[8], v[8], w[8];
-    S::store(ax, Ax), S::store(ay, Ay), S::store(bx, Bx), S::store(by, By), S::store(cx, Cx), S::store(cy, Cy);
-    S::store(u, U), S::store(v, Vv), S::store(w, Ww);
-    for (int m = zmask; m; m &= m - 1) {
-      const int l = std::countr_zero(unsigned(m));
-      u[l] = float(double(cx[l]) * by[l] - double(cy[l]) * bx[l]);
-      v[l] = float(double(ax[l]) * cy[l] - double(ay[l]) * cx[l]);
-      w[l] = float(double(bx[l]) * ay[l] - double(by[l]) * ax[l]);
-    }
-    U = S::load(u), Vv = S::load(v), Ww = S::load(w);
-  }
-  const f neg = S::lt(S::min(S::min(U, Vv), Ww), z);
-  const f pos = S::gt(S::max(S::max(U, Vv), Ww), z);
-  const f det = S::add(S::add(U, Vv), Ww);
-  int m = S::mask(S::andnot(S::and_(neg, pos), S::neq(det, z)));  // det == 0: never a hit
-  if (!m) return;
-  // Candidates: the distance from the triangle's plane in double, as intersect_watertight
-  // (exact_plane_distance: the same double operations in the same order), four lanes of a ray at
-  // once — a ray's line passes through several triangles of a leaf, most of them out of range.
-  alignas(32) float us[8], vs[8], ws[8], dets[8], ts[8];
-  S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
-  for (int ray = 0; ray < 2; ++ray) {
-    if (!((m >> (4 * ray)) & 15)) continue;
-    const uint32_t id = r.id[ray];
-    const Vec3 o{r.v->ox[id], r.v->oy[id], r.v->oz[id]}, d{r.v->dx[id], r.v->dy[id], r.v->dz[id]};
-    const __m256d v0x = _mm256_cvtps_pd(_mm_load_ps(b.v[0][0])), v0y = _mm256_cvtps_pd(_mm_load_ps(b.v[0][1])),
-                  v0z = _mm256_cvtps_pd(_mm_load_ps(b.v[0][2]));
-    const __m256d ax = _mm256_sub_pd(v0x, _mm256_set1_pd(o.x)), ay = _mm256_sub_pd(v0y, _mm256_set1_pd(o.y)),
-                  az = _mm256_sub_pd(v0z, _mm256_set1_pd(o.z));
-    const __m256d e1x = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][0])), v0x);
-    const __m256d e1y = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][1])), v0y);
-    const __m256d e1z = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][2])), v0z);
-    const __m256d e2x = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][0])), v0x);
-    const __m256d e2y = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][1])), v0y);
-    const __m256d e2z = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][2])), v0z);
-    const __m256d nx = _mm256_sub_pd(_mm256_mul_pd(e1y, e2z), _mm256_mul_pd(e1z, e2y));
-    const __m256d ny = _mm256_sub_pd(_mm256_mul_pd(e1z, e2x), _mm256_mul_pd(e1x, e2z));
-    const __m256d nz = _mm256_sub_pd(_mm256_mul_pd(e1x, e2y), _mm256_mul_pd(e1y, e2x));
-    const __m256d dn = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, _mm256_set1_pd(d.x)), _mm256_mul_pd(ny, _mm256_set1_pd(d.y))),
-                                     _mm256_mul_pd(nz, _mm256_set1_pd(d.z)));
-    const __m256d num = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, ax), _mm256_mul_pd(ny, ay)), _mm256_mul_pd(nz, az));
-    _mm_store_ps(ts + 4 * ray, _mm256_cvtpd_ps(_mm256_div_pd(num, dn)));
-    if (_mm256_movemask_pd(_mm256_cmp_pd(dn, _mm256_setzero_pd(), _CMP_EQ_OQ)) & (m >> (4 * ray)) & 15) [[unlikely]] {
-      // Edge-on (the ray lies in the plane): the sheared distance, as intersect_watertight.
-      alignas(32) float azs[8], bzs[8], czs[8];
-      S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
-      alignas(32) double dns[4];
-      _mm256_store_pd(dns, dn);
-      for (int t4 = 0; t4 < 4; ++t4) {
-        const int l = 4 * ray + t4;
-        if (dns[t4] == 0.0) ts[l] = r.v->sz[r.id[ray]] * (us[l] * azs[l] + vs[l] * bzs[l] + ws[l] * czs[l]) * (1.f / dets[l]);
-      }
-    }
-  }
-  for (; m; m &= m - 1) {
-    const int l = std::countr_zero(unsigned(m));
-    const int ray = l >> 2, t4 = l & 3;
-    Hit& h = *hit[ray];
-    const float t = ts[l];
-    if (!(t >= r.v->tmin[r.id[ray]] && t < h.t)) continue;
-    const float inv_det = 1.f / dets[l];
-    h.t = t;
-    h.u = vs[l] * inv_det;
-    h.v = ws[l] * inv_det;
-    h.prim = b.prim[t4];
-  }
-}
 
 // Per-call counters, added to the traverser's totals once per call.
 struct Counters {
@@ -256,26 +146,8 @@ struct Scratch {
   aligned_vector<uint32_t> meta, axis;
   std::vector<uint32_t> moving;       // the rays of the queue that move on to another leaf
   std::vector<Hit> hits;
-  std::vector<uint16_t> lanes[8];  // one per child slot (4 or 8 used)
-  std::vector<uint8_t> masks;      // per ray of a task: the children it entered
-  std::vector<Task> tasks;
-  std::vector<MBVHStackEntry> single;
+  mbvh_stream::Scratch st;            // the MBVH/RS stacks (and the one-ray fallback's)
 };
-
-// Left-packing shuffles: for an 8-bit mask, the byte shuffle that moves the 16-bit elements whose
-// bit is set to the front, in order.
-struct PackLut {
-  alignas(16) uint8_t s[256][16];
-  constexpr PackLut() : s{} {
-    for (int m = 0; m < 256; ++m) {
-      int o = 0;
-      for (int e = 0; e < 8; ++e)
-        if (m >> e & 1) s[m][2 * o] = uint8_t(2 * e), s[m][2 * o + 1] = uint8_t(2 * e + 1), ++o;
-      for (; o < 8; ++o) s[m][2 * o] = s[m][2 * o + 1] = 0x80;
-    }
-  }
-};
-inline constexpr PackLut kPackLut{};
 
 class RayGrid final : public TraverserBase<RayGrid> {
  public:
@@ -503,60 +375,13 @@ class RayGrid final : public TraverserBase<RayGrid> {
       if (lf.empty()) continue;
       cur.tbest = h.t;
       if (walk_entry(cur, lf.cull) == INFINITY) continue;
-      mbvh_traverse<N, 4, K>(mini<N>(), tris_.get(), nr, tr, &rc, lf.mbvh_root, h, s.single.data(), probe);
+      mbvh_traverse<N, 4, K>(mini<N>(), tris_.get(), nr, tr, &rc, lf.mbvh_root, h, s.st.single.data(), probe);
     }
     if (h.prim != kNoHit) out = h;
   }
 
   // ------------------------------------------------------------------------------------------
   // Per-queue SIMD passes over the SoA records
-
-  // RayCtx's constants for rays [0, n) of the queue, eight at a time with the same float
-  // operations (1/d, d[kx]/d[kz], ...), so the watertight test sees exactly RayCtx's values.
-  static void prepare_stream(const Stream& v, uint32_t n) {
-    const __m256 one = _mm256_set1_ps(1.f), pad = _mm256_set1_ps(kFarPad), zero = _mm256_setzero_ps();
-    const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-    // (kz == 0, kz == 1, swap) -> kx | ky << 2 | kz << 4, as RayCtx chooses them.
-    static constexpr uint32_t kPerm[2][2][2] = {
-        {{0u | 1u << 2 | 2u << 4, 1u | 0u << 2 | 2u << 4}, {2u | 0u << 2 | 1u << 4, 0u | 2u << 2 | 1u << 4}},
-        {{1u | 2u << 2 | 0u << 4, 2u | 1u << 2 | 0u << 4}, {1u | 2u << 2 | 0u << 4, 2u | 1u << 2 | 0u << 4}}};
-    for (uint32_t k = 0; k < n; k += 8) {
-      const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
-      const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
-      _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
-      _mm256_store_ps(v.fx + k, _mm256_mul_ps(ix, pad));
-      _mm256_store_ps(v.fy + k, _mm256_mul_ps(iy, pad));
-      _mm256_store_ps(v.fz + k, _mm256_mul_ps(iz, pad));
-      // kz = the dominant axis: a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2).
-      const __m256 ax = _mm256_and_ps(dx, absmask), ay = _mm256_and_ps(dy, absmask), az = _mm256_and_ps(dz, absmask);
-      const __m256 xy = _mm256_cmp_ps(ax, ay, _CMP_GE_OQ);
-      const __m256 k0 = _mm256_and_ps(xy, _mm256_cmp_ps(ax, az, _CMP_GE_OQ));
-      const __m256 k1 = _mm256_andnot_ps(xy, _mm256_cmp_ps(ay, az, _CMP_GE_OQ));
-      // kx = kz + 1, ky = kx + 1 (mod 3), swapped when d[kz] < 0.
-      const __m256 dkz = _mm256_blendv_ps(_mm256_blendv_ps(dz, dy, k1), dx, k0);
-      const __m256 dkx = _mm256_blendv_ps(_mm256_blendv_ps(dx, dz, k1), dy, k0);
-      const __m256 dky = _mm256_blendv_ps(_mm256_blendv_ps(dy, dx, k1), dz, k0);
-      const __m256 swap = _mm256_cmp_ps(dkz, zero, _CMP_LT_OQ);
-      {  // the origin in the same permutation (TriRay's ox, oy, oz)
-        const __m256 ox = _mm256_load_ps(v.ox + k), oy = _mm256_load_ps(v.oy + k), oz = _mm256_load_ps(v.oz + k);
-        const __m256 okz = _mm256_blendv_ps(_mm256_blendv_ps(oz, oy, k1), ox, k0);
-        const __m256 okx = _mm256_blendv_ps(_mm256_blendv_ps(ox, oz, k1), oy, k0);
-        const __m256 oky = _mm256_blendv_ps(_mm256_blendv_ps(oy, ox, k1), oz, k0);
-        _mm256_store_ps(v.px + k, _mm256_blendv_ps(okx, oky, swap));
-        _mm256_store_ps(v.py + k, _mm256_blendv_ps(oky, okx, swap));
-        _mm256_store_ps(v.pz + k, okz);
-      }
-      _mm256_store_ps(v.sx + k, _mm256_div_ps(_mm256_blendv_ps(dkx, dky, swap), dkz));
-      _mm256_store_ps(v.sy + k, _mm256_div_ps(_mm256_blendv_ps(dky, dkx, swap), dkz));
-      _mm256_store_ps(v.sz + k, _mm256_div_ps(one, dkz));
-      const int m0 = _mm256_movemask_ps(k0), m1 = _mm256_movemask_ps(k1), ms = _mm256_movemask_ps(swap);
-      const int sx = _mm256_movemask_ps(ix), sy = _mm256_movemask_ps(iy), sz = _mm256_movemask_ps(iz);
-      for (int j = 0; j < 8; ++j) {
-        const uint32_t perm = kPerm[m0 >> j & 1][m1 >> j & 1][ms >> j & 1];
-        v.meta[k + j] = uint32_t(sx >> j & 1) | uint32_t(sy >> j & 1) << 1 | uint32_t(sz >> j & 1) << 2 | perm << 4;
-      }
-    }
-  }
 
   // Exit distance and axis (exit_of) of rays [0, n) leaving the leaf box, eight at a time, and
   // the rays that move on: those whose closest hit so far lies beyond the exit (listed in
@@ -594,219 +419,10 @@ class RayGrid final : public TraverserBase<RayGrid> {
     return count;
   }
 
-  // ------------------------------------------------------------------------------------------
-  // Mini-MBVH stream traversal: MBVH/RS (thesis Alg. 2.9, App. C.1) on rays [0, n) of a queue.
-
-  static TriRay<4> tri_ray(const Stream& v, uint32_t id) {
-    const uint32_t m = v.meta[id];
-    return TriRay<4>(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.dx[id], v.dy[id], v.dz[id]}, int(m >> 4 & 3),
-                     int(m >> 6 & 3), int(m >> 8 & 3), v.sx[id], v.sy[id], v.sz[id], v.tmin[id]);
-  }
-  // The permuted origins come from prepare_stream, so a pair costs broadcasts only (a pair is
-  // built per leaf visit: the component selection per ray was 137 instructions a pair).
-  static PairRay pair_ray(const Stream& v, uint32_t a, uint32_t b) {
-    PairRay p;
-    const uint32_t ma = v.meta[a], mb = v.meta[b];
-    p.kx[0] = ma >> 4 & 3, p.ky[0] = ma >> 6 & 3, p.kz[0] = ma >> 8 & 3;
-    p.kx[1] = mb >> 4 & 3, p.ky[1] = mb >> 6 & 3, p.kz[1] = mb >> 8 & 3;
-    p.v = &v, p.id[0] = a, p.id[1] = b;
-    auto two = [](const float* x, uint32_t lo, uint32_t hi) {
-      return _mm256_setr_m128(_mm_broadcast_ss(x + lo), _mm_broadcast_ss(x + hi));
-    };
-    p.ox = two(v.px, a, b), p.oy = two(v.py, a, b), p.oz = two(v.pz, a, b);
-    p.sx = two(v.sx, a, b), p.sy = two(v.sy, a, b), p.sz = two(v.sz, a, b);
-    return p;
-  }
-  static RayCtx ray_ctx(const Stream& v, uint32_t id) {
-    return RayCtx(Ray{Vec3{v.ox[id], v.oy[id], v.oz[id]}, v.tmin[id], Vec3{v.dx[id], v.dy[id], v.dz[id]}, INFINITY});
-  }
-
-  template <int N, TriKernel K, class P>
-  void single(Scratch& s, const Stream& v, uint32_t id, uint32_t ref, P& probe) const {
-    const NodeRay<N> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]}, v.tmin[id]);
-    if constexpr (K == TriKernel::watertight) {
-      mbvh_traverse<N, 4, K>(mini<N>(), nullptr, nr, tri_ray(v, id), nullptr, ref, v.hits[id], s.single.data(), probe);
-    } else {
-      const RayCtx rc = ray_ctx(v, id);
-      mbvh_traverse<N, 4, K>(mini<N>(), tris_.get(), nr, tri_ray(v, id), &rc, ref, v.hits[id], s.single.data(), probe);
-    }
-  }
-
-  template <class P>
-  static void probe_ray(const Stream& v, uint32_t id, P& probe) {
-    if constexpr (P::enabled) {
-      for (const float* f : std::initializer_list<const float*>{v.ox, v.oy, v.oz, v.ix, v.iy, v.iz, v.fx, v.fy, v.fz, v.tmin})
-        probe.read(f + id, 4);
-      probe.read(v.meta + id, 4);
-      probe.read(&v.hits[id], 4);
-    }
-  }
-
-  // Writes the ids of list[0, n) whose mask has bit c to dst (which may be list itself), in
-  // order; returns their number. Reads up to 15 entries past n and writes up to 7 past the
-  // result: the lane arrays and the mask buffer carry that slack.
-  static uint32_t pack_lane(const uint16_t* list, const uint8_t* masks, uint32_t n, unsigned c, uint16_t* dst) {
-    const __m128i shift = _mm_cvtsi32_si128(int(7 - c));
-    uint32_t o = 0;
-    for (uint32_t i = 0; i < n; i += 16) {
-      // Bit c of 16 mask bytes to bit 7 (a 16-bit shift moves each byte's bit c to its bit 7).
-      uint32_t bits = uint32_t(_mm_movemask_epi8(
-          _mm_sll_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(masks + i)), shift)));
-      if (n - i < 16) bits &= (1u << (n - i)) - 1;
-      for (uint32_t g = 0; g < 2 && i + 8 * g < n; ++g) {
-        const uint32_t b8 = (bits >> (8 * g)) & 255u;
-        const __m128i ids = _mm_loadu_si128(reinterpret_cast<const __m128i*>(list + i + 8 * g));
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + o),
-                         _mm_shuffle_epi8(ids, _mm_load_si128(reinterpret_cast<const __m128i*>(kPackLut.s[b8]))));
-        o += uint32_t(std::popcount(b8));
-      }
-    }
-    return o;
-  }
-
   template <int N>
   const MBVH<N, 4>& mini() const {
     if constexpr (N == 8) return oct_->mini8;
     else return oct_->mini;
-  }
-
-  // N = 4: the thesis' SSE MBVH/RS. N = 8: the same with one AVX2 8-child box test per ray and
-  // eight active-ray stacks (the natural SIMD width of AVX2, as mbvh8_single); with the SAH
-  // collapse a ray visits far fewer nodes for about the same cost per test.
-  template <int N, TriKernel K, class P>
-  void stream(Scratch& s, const Stream& v, uint32_t n, uint32_t root, P& probe) const {
-    using SN = mbvh_simd::V<N>;
-    using f = typename SN::f;
-    const MBVH<N, 4>& m = mini<N>();
-    const MBVHNode<N>* nodes = m.nodes.data();
-    const TriBlock<4>* blocks = m.blocks.data();
-    if (n == 1) {
-      single<N, K>(s, v, 0, root, probe);
-      return;
-    }
-    uint16_t* lane[N];
-    uint32_t head[N];
-    for (int c = 0; c < N; ++c) lane[c] = s.lanes[c].data(), head[c] = 0;
-    head[0] = n;
-    for (uint32_t j = 0; j < n; ++j) lane[0][j] = uint16_t(j);
-    Task* tasks = s.tasks.data();
-    uint32_t ntasks = 0;
-    tasks[ntasks++] = {root, 0, n};
-    while (ntasks) {
-      const Task t = tasks[--ntasks];
-      probe.read(&tasks[ntasks], sizeof(Task));
-      head[t.lane] -= t.count;
-      uint16_t* list = lane[t.lane] + head[t.lane];
-      if (t.count == 1) {  // a stream of one ray: ordinary single-ray traversal of the subtree
-        probe.read(list, sizeof(uint16_t));
-        probe_ray(v, list[0], probe);
-        single<N, K>(s, v, list[0], t.ref, probe);
-        continue;
-      }
-      if (mbvh_ref::is_leaf(t.ref)) {
-        probe_leaf(m, t.ref, probe, t.count);
-        uint32_t i = 0;
-        if constexpr (K == TriKernel::watertight) {
-          const uint32_t first = mbvh_ref::first_block(t.ref), nblocks = (mbvh_ref::num_tris(t.ref) + 3) / 4;
-          for (; i + 1 < t.count; i += 2) {
-            probe.read(&list[i], 2 * sizeof(uint16_t));
-            probe_ray(v, list[i], probe);
-            probe_ray(v, list[i + 1], probe);
-            const PairRay pr = pair_ray(v, list[i], list[i + 1]);
-            Hit* h[2] = {&v.hits[list[i]], &v.hits[list[i + 1]]};
-            for (uint32_t k = 0; k < nblocks; ++k) pair_intersect(pr, blocks[first + k], h);
-          }
-        }
-        for (; i < t.count; ++i) {
-          probe.read(&list[i], sizeof(uint16_t));
-          const uint32_t id = list[i];
-          probe_ray(v, id, probe);
-          if constexpr (K == TriKernel::watertight) {
-            leaf_test<4, K>(blocks, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
-          } else {
-            const RayCtx rc = ray_ctx(v, id);
-            leaf_test<4, K>(blocks, tris_.get(), tri_ray(v, id), &rc, t.ref, v.hits[id]);
-          }
-        }
-        continue;
-      }
-      // Interior node: every ray of the task against the N child boxes (box_test of mbvh.h:
-      // sign-selected slabs, NaN slabs ignored by operand order, Ize-padded far planes).
-      const MBVHNode<N>& nd = nodes[t.ref];
-      probe.node(&nd, sizeof(nd), t.count);
-      const float* b = &nd.box[0][0];
-      uint8_t* masks = s.masks.data();
-      unsigned active = 0;
-      f dsum = SN::zero();
-      for (uint32_t i = 0; i < t.count; ++i) {
-        probe.read(&list[i], sizeof(uint16_t));
-        const uint16_t id = list[i];
-        probe_ray(v, id, probe);
-        // Rows of box[6][N]: near plane lo (row a) or hi (row 3 + a) by the direction's sign.
-        const uint32_t oct = v.meta[id];
-        const uint32_t nx = (oct & 1) * 3 * N, ny = (oct >> 1 & 1) * 3 * N, nz = (oct >> 2 & 1) * 3 * N;
-        const f ox = SN::set1(v.ox[id]), oy = SN::set1(v.oy[id]), oz = SN::set1(v.oz[id]);
-        const f tnx = SN::mul(SN::sub(SN::load(b + nx), ox), SN::set1(v.ix[id]));
-        const f tny = SN::mul(SN::sub(SN::load(b + N + ny), oy), SN::set1(v.iy[id]));
-        const f tnz = SN::mul(SN::sub(SN::load(b + 2 * N + nz), oz), SN::set1(v.iz[id]));
-        const f tfx = SN::mul(SN::sub(SN::load(b + 3 * N - nx), ox), SN::set1(v.fx[id]));
-        const f tfy = SN::mul(SN::sub(SN::load(b + 4 * N - ny), oy), SN::set1(v.fy[id]));
-        const f tfz = SN::mul(SN::sub(SN::load(b + 5 * N - nz), oz), SN::set1(v.fz[id]));
-        const f tn = SN::max(tnz, SN::max(tny, SN::max(tnx, SN::set1(v.tmin[id]))));
-        const f tf = SN::min(tfz, SN::min(tfy, SN::min(tfx, SN::set1(v.hits[id].t))));
-        const f enter = SN::le(tn, tf);
-        dsum = SN::add(dsum, SN::and_(tn, enter));
-        const unsigned mk = unsigned(SN::mask(enter));
-        masks[i] = uint8_t(mk);
-        active |= mk;
-      }
-      if (!active) continue;
-      // Distribute the rays over the lanes of the children they entered (App. C.1's push, done
-      // per child after the box tests instead of N branch-free stores per ray: a child's ids
-      // are left-packed eight at a time with one byte shuffle). The task's own lane is packed
-      // last and in place: its output never overtakes its input.
-      uint32_t cnt[N] = {};
-      const unsigned own = 1u << t.lane;
-      for (unsigned todo = (active & ~own) | (active & own); todo;) {
-        const unsigned c = (todo & ~own) ? unsigned(std::countr_zero(todo & ~own)) : t.lane;
-        todo &= ~(1u << c);
-        uint16_t* dst = lane[c] + head[c];
-        cnt[c] = pack_lane(list, masks, t.count, c, dst);
-        if constexpr (P::enabled)
-          for (uint32_t j = 0; j < cnt[c]; ++j) probe.write(&dst[j], sizeof(uint16_t));
-        head[c] += cnt[c];
-      }
-      if (!(active & (active - 1))) {
-        const int c = std::countr_zero(unsigned(active));
-        tasks[ntasks] = {nd.ref[c], uint32_t(c), cnt[c]};
-        probe.write(&tasks[ntasks++], sizeof(Task));
-        continue;
-      }
-      // Several children: the nearest (smallest summed entry distance) is popped first.
-      alignas(32) int32_t keys[N];
-      if constexpr (N == 4) {
-        const __m128 act = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(cnt)),
-                                                            _mm_setzero_si128()));
-        _mm_store_si128(reinterpret_cast<__m128i*>(keys), mbvh_simd::sort4(mbvh_simd::sort_keys4(dsum, act)));
-      } else {
-        const __m256 act = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
-            _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt)), _mm256_setzero_si256()));
-        _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(dsum, act)));
-      }
-      for (int j = std::popcount(unsigned(active)) - 1; j >= 0; --j) {
-        const uint32_t c = uint32_t(keys[j]) & (N - 1);
-        tasks[ntasks] = {nd.ref[c], c, cnt[c]};
-        probe.write(&tasks[ntasks++], sizeof(Task));
-        // The farther children wait on the stack: start fetching their node or first block.
-        if (j > 0) {
-          const uint32_t ref = nd.ref[c];
-          const char* p = mbvh_ref::is_leaf(ref) ? reinterpret_cast<const char*>(blocks + mbvh_ref::first_block(ref))
-                                                 : reinterpret_cast<const char*>(nodes + ref);
-          _mm_prefetch(p, _MM_HINT_T0);
-          _mm_prefetch(p + 64, _MM_HINT_T0);
-        }
-      }
-    }
   }
 
   // ------------------------------------------------------------------------------------------
@@ -856,13 +472,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       s.moving.resize(mp);
       s.hits.resize(mp);
     }
-    // Per lane at most one pending task per tree level, each with at most a queue; tasks: N - 1
-    // siblings pending per level; the one-ray stack: mbvh_traverse's (N-1) * depth + N.
-    for (int l = 0; l < N; ++l)
-      if (s.lanes[l].size() < size_t(depth_ + 1) * M + 32) s.lanes[l].resize(size_t(depth_ + 1) * M + 32);
-    if (s.masks.size() < mp + 16) s.masks.resize(mp + 16);
-    if (s.tasks.size() < size_t(N - 1) * depth_ + 2) s.tasks.resize(size_t(N - 1) * depth_ + 2);
-    if (s.single.size() < size_t(N - 1) * depth_ + N + 2) s.single.resize(size_t(N - 1) * depth_ + N + 2);
+    s.st.reserve(N, depth_, M);
     c.rays += n;
     if constexpr (P::enabled)
       if (probe.counts) probe.counts->rays += n;
@@ -960,19 +570,18 @@ class RayGrid final : public TraverserBase<RayGrid> {
       c.queues++;
       c.queued_rays += cnt;
       const float* b = qbase(s, q);
-      const Stream v{b + kOX * mp, b + kOY * mp, b + kOZ * mp, b + kDX * mp, b + kDY * mp, b + kDZ * mp,
-                     b + kTmin * mp, reinterpret_cast<const uint32_t*>(b + kId * mp),
-                     d + kIX * mp, d + kIY * mp, d + kIZ * mp, d + kFX * mp, d + kFY * mp, d + kFZ * mp,
-                     d + kSX * mp, d + kSY * mp, d + kSZ * mp, d + kTexit * mp,
-                     d + kPX * mp, d + kPY * mp, d + kPZ * mp, s.meta.data(), s.axis.data(),
-                     s.hits.data()};
+      const Stream v{{b + kOX * mp, b + kOY * mp, b + kOZ * mp, b + kDX * mp, b + kDY * mp, b + kDZ * mp,
+                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, d + kFX * mp, d + kFY * mp,
+                      d + kFZ * mp, d + kSX * mp, d + kSY * mp, d + kSZ * mp, d + kPX * mp, d + kPY * mp,
+                      d + kPZ * mp, s.meta.data(), s.hits.data()},
+                     reinterpret_cast<const uint32_t*>(b + kId * mp), d + kTexit * mp, s.axis.data()};
       if constexpr (P::enabled)
         for (uint32_t k = 0; k < cnt; ++k)
           for (uint32_t f = 0; f < kFields; ++f) probe.read(&b[f * mp + k], 4);
-      prepare_stream(v, cnt);
+      mbvh_stream::prepare(v, cnt);
       for (uint32_t k = 0; k < cnt; ++k) v.hits[k] = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
 
-      stream<N, K>(s, v, cnt, lf.mbvh_root, probe);
+      mbvh_stream::trace<N, K>(mini<N>(), tris_.get(), s.st, v, cnt, lf.mbvh_root, probe);
 
       // Finish or move on (Alg. 5.1, second half of `process`): the hits found here go to the
       // output (a ray's best hit only ever improves), the exits of the whole queue are computed

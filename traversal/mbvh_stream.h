@@ -1,0 +1,438 @@
+// The MBVH/RS stream kernel (Tsakok 2009; thesis §2.2 Alg. 2.9, Appendix C.1), shared by
+// `mbvh_rs` (streams of consecutive packets over the scene's MBVH) and `raygrid` (the rays of one
+// octree-leaf queue over that leaf's mini-MBVH, thesis §5.3). One kernel, templated on the node
+// width N (4: the thesis' SSE layout; 8: AVX2 nodes, MBVHNode<8>), on 4-wide triangle blocks.
+//
+// A stream is a set of rays in SoA form (`Rays`). Traversal: a task is (node, lane, count); its
+// rays are the `count` ids on top of lane `lane`'s active-ray stack. Every ray of the task is
+// tested against the node's N child boxes (one N-wide slab test per ray), and every ray that
+// enters child c is pushed onto lane c's stack, so a child's stream holds only the rays that enter
+// it. One task per entered child goes onto the task stack, ordered by the summed entry distances
+// of their rays (Alg. 2.10's sorting network, 8-wide for N = 8), the nearest popped first. Leaves
+// intersect every ray of their stream, two rays per AVX2 pass (pair_intersect). A stream that has
+// shrunk to one ray finishes with ordinary single-ray traversal (thesis: "falls back to efficient
+// single ray traversal when the size of a stream drops to one").
+//
+// Differences from Appendix C.1 that do not change results:
+// - the push is done per child after the box tests (N-bit masks per ray, ids left-packed eight
+//   at a time with one byte shuffle) instead of N branch-free stores per ray: for N = 8 the
+//   per-ray stores dominated;
+// - the per-ray constants (reciprocals, padded reciprocals, watertight shear and permutation)
+//   are computed for the whole stream eight rays per AVX2 instruction (prepare), from the same
+//   float operations as RayCtx, so every test decides exactly as the single-ray schemes do;
+// - the farther children of a node are prefetched when pushed.
+#pragma once
+#include <immintrin.h>
+
+#include <algorithm>
+#include <bit>
+#include <cstdint>
+#include <initializer_list>
+#include <vector>
+
+#include "structures/mbvh.h"
+
+namespace tb::mbvh_stream {
+
+// The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
+// caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest.
+// `meta` packs the direction's sign octant (bits 0-2: reciprocal negative on x, y, z) and the
+// watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
+struct Rays {
+  const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
+  float *ix, *iy, *iz, *fx, *fy, *fz, *sx, *sy, *sz;
+  float *px, *py, *pz;  // the origin permuted to (kx, ky, kz) for the watertight test
+  uint32_t* meta;
+  Hit* hits;
+};
+
+// RayCtx's constants for rays [0, n), eight at a time with the same float operations (1/d,
+// d[kx]/d[kz], ...), so the watertight test sees exactly RayCtx's values. Reads and writes up to
+// the next multiple of 8.
+inline void prepare(const Rays& v, uint32_t n) {
+  const __m256 one = _mm256_set1_ps(1.f), pad = _mm256_set1_ps(kFarPad), zero = _mm256_setzero_ps();
+  const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  // (kz == 0, kz == 1, swap) -> kx | ky << 2 | kz << 4, as RayCtx chooses them.
+  static constexpr uint32_t kPerm[2][2][2] = {
+      {{0u | 1u << 2 | 2u << 4, 1u | 0u << 2 | 2u << 4}, {2u | 0u << 2 | 1u << 4, 0u | 2u << 2 | 1u << 4}},
+      {{1u | 2u << 2 | 0u << 4, 2u | 1u << 2 | 0u << 4}, {1u | 2u << 2 | 0u << 4, 2u | 1u << 2 | 0u << 4}}};
+  for (uint32_t k = 0; k < n; k += 8) {
+    const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
+    const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
+    _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
+    _mm256_store_ps(v.fx + k, _mm256_mul_ps(ix, pad));
+    _mm256_store_ps(v.fy + k, _mm256_mul_ps(iy, pad));
+    _mm256_store_ps(v.fz + k, _mm256_mul_ps(iz, pad));
+    // kz = the dominant axis: a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2).
+    const __m256 ax = _mm256_and_ps(dx, absmask), ay = _mm256_and_ps(dy, absmask), az = _mm256_and_ps(dz, absmask);
+    const __m256 xy = _mm256_cmp_ps(ax, ay, _CMP_GE_OQ);
+    const __m256 k0 = _mm256_and_ps(xy, _mm256_cmp_ps(ax, az, _CMP_GE_OQ));
+    const __m256 k1 = _mm256_andnot_ps(xy, _mm256_cmp_ps(ay, az, _CMP_GE_OQ));
+    // kx = kz + 1, ky = kx + 1 (mod 3), swapped when d[kz] < 0.
+    const __m256 dkz = _mm256_blendv_ps(_mm256_blendv_ps(dz, dy, k1), dx, k0);
+    const __m256 dkx = _mm256_blendv_ps(_mm256_blendv_ps(dx, dz, k1), dy, k0);
+    const __m256 dky = _mm256_blendv_ps(_mm256_blendv_ps(dy, dx, k1), dz, k0);
+    const __m256 swap = _mm256_cmp_ps(dkz, zero, _CMP_LT_OQ);
+    {  // the origin in the same permutation (TriRay's ox, oy, oz)
+      const __m256 ox = _mm256_load_ps(v.ox + k), oy = _mm256_load_ps(v.oy + k), oz = _mm256_load_ps(v.oz + k);
+      const __m256 okz = _mm256_blendv_ps(_mm256_blendv_ps(oz, oy, k1), ox, k0);
+      const __m256 okx = _mm256_blendv_ps(_mm256_blendv_ps(ox, oz, k1), oy, k0);
+      const __m256 oky = _mm256_blendv_ps(_mm256_blendv_ps(oy, ox, k1), oz, k0);
+      _mm256_store_ps(v.px + k, _mm256_blendv_ps(okx, oky, swap));
+      _mm256_store_ps(v.py + k, _mm256_blendv_ps(oky, okx, swap));
+      _mm256_store_ps(v.pz + k, okz);
+    }
+    _mm256_store_ps(v.sx + k, _mm256_div_ps(_mm256_blendv_ps(dkx, dky, swap), dkz));
+    _mm256_store_ps(v.sy + k, _mm256_div_ps(_mm256_blendv_ps(dky, dkx, swap), dkz));
+    _mm256_store_ps(v.sz + k, _mm256_div_ps(one, dkz));
+    const int m0 = _mm256_movemask_ps(k0), m1 = _mm256_movemask_ps(k1), ms = _mm256_movemask_ps(swap);
+    const int sx = _mm256_movemask_ps(ix), sy = _mm256_movemask_ps(iy), sz = _mm256_movemask_ps(iz);
+    for (int j = 0; j < 8; ++j) {
+      const uint32_t perm = kPerm[m0 >> j & 1][m1 >> j & 1][ms >> j & 1];
+      v.meta[k + j] = uint32_t(sx >> j & 1) | uint32_t(sy >> j & 1) << 1 | uint32_t(sz >> j & 1) << 2 | perm << 4;
+    }
+  }
+}
+
+// Two rays against one block of four triangles in one AVX2 pass: ray A in the low 128-bit half,
+// ray B in the high half, each half the watertight test of mbvh.h's block_intersect (Woop,
+// Benthin and Wald 2013) with the same float operations in the same order per lane, so every
+// lane decides exactly as the 4-wide test would — watertightness carries over — at half the
+// instructions per ray. MBVH/RS leaf streams hold several rays (Table 10), so pairs are common.
+struct PairRay {
+  __m256 ox, oy, oz, sx, sy, sz;  // origin permuted to (kx, ky, kz) and the shear, per half
+  uint32_t kx[2], ky[2], kz[2];
+  const Rays* v;  // the rest of the two rays' records, read only for candidate hits
+  uint32_t id[2];
+};
+
+inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32_t row_b) {
+  return _mm256_loadu2_m128(b.v[corner][row_b], b.v[corner][row_a]);
+}
+
+inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) {
+  using S = mbvh_simd::V<8>;
+  using f = __m256;
+  const f Az = S::sub(pair_rows(b, 0, r.kz[0], r.kz[1]), r.oz);
+  const f Bz = S::sub(pair_rows(b, 1, r.kz[0], r.kz[1]), r.oz);
+  const f Cz = S::sub(pair_rows(b, 2, r.kz[0], r.kz[1]), r.oz);
+  const f Ax = S::sub(S::sub(pair_rows(b, 0, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Az));
+  const f Ay = S::sub(S::sub(pair_rows(b, 0, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Az));
+  const f Bx = S::sub(S::sub(pair_rows(b, 1, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Bz));
+  const f By = S::sub(S::sub(pair_rows(b, 1, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Bz));
+  const f Cx = S::sub(S::sub(pair_rows(b, 2, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Cz));
+  const f Cy = S::sub(S::sub(pair_rows(b, 2, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Cz));
+  f U, Vv, Ww;
+  edge_functions<S>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww);  // incl. the double fallback on edges
+  const f z = S::zero();
+  const f neg = S::lt(S::min(S::min(U, Vv), Ww), z);
+  const f pos = S::gt(S::max(S::max(U, Vv), Ww), z);
+  const f det = S::add(S::add(U, Vv), Ww);
+  int m = S::mask(S::andnot(S::and_(neg, pos), S::neq(det, z)));  // det == 0: never a hit
+  if (!m) return;
+  // Candidates: the distance from the triangle's plane in double, as intersect_watertight
+  // (exact_plane_distance: the same double operations in the same order), four lanes of a ray at
+  // once — a ray's line passes through several triangles of a leaf, most of them out of range.
+  alignas(32) float us[8], vs[8], ws[8], dets[8], ts[8];
+  S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
+  for (int ray = 0; ray < 2; ++ray) {
+    if (!((m >> (4 * ray)) & 15)) continue;
+    const uint32_t id = r.id[ray];
+    const Vec3 o{r.v->ox[id], r.v->oy[id], r.v->oz[id]}, d{r.v->dx[id], r.v->dy[id], r.v->dz[id]};
+    const __m256d v0x = _mm256_cvtps_pd(_mm_load_ps(b.v[0][0])), v0y = _mm256_cvtps_pd(_mm_load_ps(b.v[0][1])),
+                  v0z = _mm256_cvtps_pd(_mm_load_ps(b.v[0][2]));
+    const __m256d ax = _mm256_sub_pd(v0x, _mm256_set1_pd(o.x)), ay = _mm256_sub_pd(v0y, _mm256_set1_pd(o.y)),
+                  az = _mm256_sub_pd(v0z, _mm256_set1_pd(o.z));
+    const __m256d e1x = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][0])), v0x);
+    const __m256d e1y = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][1])), v0y);
+    const __m256d e1z = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][2])), v0z);
+    const __m256d e2x = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][0])), v0x);
+    const __m256d e2y = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][1])), v0y);
+    const __m256d e2z = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][2])), v0z);
+    const __m256d nx = _mm256_sub_pd(_mm256_mul_pd(e1y, e2z), _mm256_mul_pd(e1z, e2y));
+    const __m256d ny = _mm256_sub_pd(_mm256_mul_pd(e1z, e2x), _mm256_mul_pd(e1x, e2z));
+    const __m256d nz = _mm256_sub_pd(_mm256_mul_pd(e1x, e2y), _mm256_mul_pd(e1y, e2x));
+    const __m256d dn = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, _mm256_set1_pd(d.x)), _mm256_mul_pd(ny, _mm256_set1_pd(d.y))),
+                                     _mm256_mul_pd(nz, _mm256_set1_pd(d.z)));
+    const __m256d num = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, ax), _mm256_mul_pd(ny, ay)), _mm256_mul_pd(nz, az));
+    _mm_store_ps(ts + 4 * ray, _mm256_cvtpd_ps(_mm256_div_pd(num, dn)));
+    if (_mm256_movemask_pd(_mm256_cmp_pd(dn, _mm256_setzero_pd(), _CMP_EQ_OQ)) & (m >> (4 * ray)) & 15) [[unlikely]] {
+      // Edge-on (the ray lies in the plane): the sheared distance, as intersect_watertight.
+      alignas(32) float azs[8], bzs[8], czs[8];
+      S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
+      alignas(32) double dns[4];
+      _mm256_store_pd(dns, dn);
+      for (int t4 = 0; t4 < 4; ++t4) {
+        const int l = 4 * ray + t4;
+        if (dns[t4] == 0.0) ts[l] = r.v->sz[r.id[ray]] * (us[l] * azs[l] + vs[l] * bzs[l] + ws[l] * czs[l]) * (1.f / dets[l]);
+      }
+    }
+  }
+  for (; m; m &= m - 1) {
+    const int l = std::countr_zero(unsigned(m));
+    const int ray = l >> 2, t4 = l & 3;
+    Hit& h = *hit[ray];
+    const float t = ts[l];
+    if (!(t >= r.v->tmin[r.id[ray]] && t < h.t)) continue;
+    const float inv_det = 1.f / dets[l];
+    h.t = t;
+    h.u = vs[l] * inv_det;
+    h.v = ws[l] * inv_det;
+    h.prim = b.prim[t4];
+  }
+}
+
+inline TriRay<4> tri_ray(const Rays& v, uint32_t id) {
+  const uint32_t m = v.meta[id];
+  return TriRay<4>(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.dx[id], v.dy[id], v.dz[id]}, int(m >> 4 & 3),
+                   int(m >> 6 & 3), int(m >> 8 & 3), v.sx[id], v.sy[id], v.sz[id], v.tmin[id]);
+}
+// The permuted origins come from prepare(), so a pair costs broadcasts only (a pair is built per
+// leaf visit: the component selection per ray was 137 instructions a pair).
+inline PairRay pair_ray(const Rays& v, uint32_t a, uint32_t b) {
+  PairRay p;
+  const uint32_t ma = v.meta[a], mb = v.meta[b];
+  p.kx[0] = ma >> 4 & 3, p.ky[0] = ma >> 6 & 3, p.kz[0] = ma >> 8 & 3;
+  p.kx[1] = mb >> 4 & 3, p.ky[1] = mb >> 6 & 3, p.kz[1] = mb >> 8 & 3;
+  p.v = &v, p.id[0] = a, p.id[1] = b;
+  auto two = [](const float* x, uint32_t lo, uint32_t hi) {
+    return _mm256_setr_m128(_mm_broadcast_ss(x + lo), _mm_broadcast_ss(x + hi));
+  };
+  p.ox = two(v.px, a, b), p.oy = two(v.py, a, b), p.oz = two(v.pz, a, b);
+  p.sx = two(v.sx, a, b), p.sy = two(v.sy, a, b), p.sz = two(v.sz, a, b);
+  return p;
+}
+// For the scalar kernels (moller, plane, plane_rcp): RayCtx rebuilt from the record (its tmax is
+// unused: the kernels search up to the hit's t).
+inline RayCtx ray_ctx(const Rays& v, uint32_t id) {
+  return RayCtx(Ray{Vec3{v.ox[id], v.oy[id], v.oz[id]}, v.tmin[id], Vec3{v.dx[id], v.dy[id], v.dz[id]}, INFINITY});
+}
+
+// What the box test of one ray reads.
+template <class P>
+inline void probe_ray(const Rays& v, uint32_t id, P& probe) {
+  if constexpr (P::enabled) {
+    for (const float* f : std::initializer_list<const float*>{v.ox, v.oy, v.oz, v.ix, v.iy, v.iz, v.fx, v.fy, v.fz, v.tmin})
+      probe.read(f + id, 4);
+    probe.read(v.meta + id, 4);
+    probe.read(&v.hits[id], 4);
+  }
+}
+
+// Left-packing shuffles: for an 8-bit mask, the byte shuffle that moves the 16-bit elements whose
+// bit is set to the front, in order.
+struct PackLut {
+  alignas(16) uint8_t s[256][16];
+  constexpr PackLut() : s{} {
+    for (int m = 0; m < 256; ++m) {
+      int o = 0;
+      for (int e = 0; e < 8; ++e)
+        if (m >> e & 1) s[m][2 * o] = uint8_t(2 * e), s[m][2 * o + 1] = uint8_t(2 * e + 1), ++o;
+      for (; o < 8; ++o) s[m][2 * o] = s[m][2 * o + 1] = 0x80;
+    }
+  }
+};
+inline constexpr PackLut kPackLut{};
+
+// Writes the ids of list[0, n) whose mask has bit c to dst (which may be list itself), in order;
+// returns their number. Reads up to 15 entries past n and writes up to 7 past the result: the
+// lane arrays and the mask buffer carry that slack (Scratch::reserve).
+inline uint32_t pack_lane(const uint16_t* list, const uint8_t* masks, uint32_t n, unsigned c, uint16_t* dst) {
+  const __m128i shift = _mm_cvtsi32_si128(int(7 - c));
+  uint32_t o = 0;
+  for (uint32_t i = 0; i < n; i += 16) {
+    // Bit c of 16 mask bytes to bit 7 (a 16-bit shift moves each byte's bit c to its bit 7).
+    uint32_t bits = uint32_t(_mm_movemask_epi8(
+        _mm_sll_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(masks + i)), shift)));
+    if (n - i < 16) bits &= (1u << (n - i)) - 1;
+    for (uint32_t g = 0; g < 2 && i + 8 * g < n; ++g) {
+      const uint32_t b8 = (bits >> (8 * g)) & 255u;
+      const __m128i ids = _mm_loadu_si128(reinterpret_cast<const __m128i*>(list + i + 8 * g));
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + o),
+                       _mm_shuffle_epi8(ids, _mm_load_si128(reinterpret_cast<const __m128i*>(kPackLut.s[b8]))));
+      o += uint32_t(std::popcount(b8));
+    }
+  }
+  return o;
+}
+
+struct Task {
+  uint32_t ref;    // MBVH child reference (interior node or leaf)
+  uint32_t lane;   // the active-ray stack holding its rays
+  uint32_t count;  // how many (on top of that stack)
+};
+
+// The stacks of one stream traversal; reused across streams (one per thread of a call).
+struct Scratch {
+  std::vector<uint16_t> lanes[8];  // active-ray stacks, one per child slot (N used)
+  std::vector<uint8_t> masks;      // per ray of a task: the children it entered
+  std::vector<Task> tasks;
+  std::vector<MBVHStackEntry> single;  // the one-ray fallback's stack
+
+  // For streams of up to `rays` rays over an MBVH of width n whose deepest leaf is at `depth`
+  // (root = 1). Per lane at most one pending task per tree level (siblings use distinct lanes,
+  // and a task's children are all consumed before its next sibling), each with at most a
+  // stream, plus pack_lane's slack; tasks: n - 1 siblings pending per level; the one-ray stack:
+  // mbvh_traverse's (n - 1) * depth + n.
+  void reserve(int n, uint32_t depth, uint32_t rays) {
+    for (int l = 0; l < n; ++l)
+      if (lanes[l].size() < size_t(depth + 1) * rays + 32) lanes[l].resize(size_t(depth + 1) * rays + 32);
+    if (masks.size() < size_t(rays) + 32) masks.resize(size_t(rays) + 32);
+    if (tasks.size() < size_t(n - 1) * depth + 2) tasks.resize(size_t(n - 1) * depth + 2);
+    if (single.size() < size_t(n - 1) * depth + n + 2) single.resize(size_t(n - 1) * depth + n + 2);
+  }
+};
+
+// Ordinary single-ray traversal of the subtree `ref` for ray `id` (streams of one).
+template <int N, TriKernel K, class P>
+inline void single(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v, uint32_t id, uint32_t ref,
+                   P& probe) {
+  const NodeRay<N> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]}, v.tmin[id]);
+  if constexpr (K == TriKernel::watertight) {
+    mbvh_traverse<N, 4, K>(m, nullptr, nr, tri_ray(v, id), nullptr, ref, v.hits[id], s.single.data(), probe);
+  } else {
+    const RayCtx rc = ray_ctx(v, id);
+    mbvh_traverse<N, 4, K>(m, ts, nr, tri_ray(v, id), &rc, ref, v.hits[id], s.single.data(), probe);
+  }
+}
+
+// Alg. 2.9 on rays [0, n) of `v` (prepared) from node `root` of `m`; the closest hits go to
+// v.hits. `ts`: the triangle set in lane order for the scalar kernels (null for watertight).
+// N = 4: the thesis' SSE MBVH/RS. N = 8: one AVX2 8-child box test per ray and eight active-ray
+// stacks (the natural SIMD width of AVX2, as mbvh8_single).
+template <int N, TriKernel K, class P>
+void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v, uint32_t n, uint32_t root,
+           P& probe) {
+  using SN = mbvh_simd::V<N>;
+  using f = typename SN::f;
+  const MBVHNode<N>* nodes = m.nodes.data();
+  const TriBlock<4>* blocks = m.blocks.data();
+  if (n == 0) return;
+  if (n == 1) {
+    single<N, K>(m, ts, s, v, 0, root, probe);
+    return;
+  }
+  uint16_t* lane[N];
+  uint32_t head[N];
+  for (int c = 0; c < N; ++c) lane[c] = s.lanes[c].data(), head[c] = 0;
+  head[0] = n;
+  for (uint32_t j = 0; j < n; ++j) lane[0][j] = uint16_t(j);
+  Task* tasks = s.tasks.data();
+  uint32_t ntasks = 0;
+  tasks[ntasks++] = {root, 0, n};
+  while (ntasks) {
+    const Task t = tasks[--ntasks];
+    probe.read(&tasks[ntasks], sizeof(Task));
+    head[t.lane] -= t.count;
+    uint16_t* list = lane[t.lane] + head[t.lane];
+    if (t.count == 1) {  // a stream of one ray: ordinary single-ray traversal of the subtree
+      probe.read(list, sizeof(uint16_t));
+      probe_ray(v, list[0], probe);
+      single<N, K>(m, ts, s, v, list[0], t.ref, probe);
+      continue;
+    }
+    if (mbvh_ref::is_leaf(t.ref)) {
+      probe_leaf(m, t.ref, probe, t.count);
+      uint32_t i = 0;
+      if constexpr (K == TriKernel::watertight) {
+        const uint32_t first = mbvh_ref::first_block(t.ref), nblocks = (mbvh_ref::num_tris(t.ref) + 3) / 4;
+        for (; i + 1 < t.count; i += 2) {
+          probe.read(&list[i], 2 * sizeof(uint16_t));
+          probe_ray(v, list[i], probe);
+          probe_ray(v, list[i + 1], probe);
+          const PairRay pr = pair_ray(v, list[i], list[i + 1]);
+          Hit* h[2] = {&v.hits[list[i]], &v.hits[list[i + 1]]};
+          for (uint32_t k = 0; k < nblocks; ++k) pair_intersect(pr, blocks[first + k], h);
+        }
+      }
+      for (; i < t.count; ++i) {
+        probe.read(&list[i], sizeof(uint16_t));
+        const uint32_t id = list[i];
+        probe_ray(v, id, probe);
+        if constexpr (K == TriKernel::watertight) {
+          leaf_test<4, K>(blocks, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
+        } else {
+          const RayCtx rc = ray_ctx(v, id);
+          leaf_test<4, K>(blocks, ts, tri_ray(v, id), &rc, t.ref, v.hits[id]);
+        }
+      }
+      continue;
+    }
+    // Interior node: every ray of the task against the N child boxes (box_test of mbvh.h:
+    // sign-selected slabs, NaN slabs ignored by operand order, Ize-padded far planes).
+    const MBVHNode<N>& nd = nodes[t.ref];
+    probe.node(&nd, sizeof(nd), t.count);
+    const float* b = &nd.box[0][0];
+    uint8_t* masks = s.masks.data();
+    unsigned active = 0;
+    f dsum = SN::zero();
+    for (uint32_t i = 0; i < t.count; ++i) {
+      probe.read(&list[i], sizeof(uint16_t));
+      const uint16_t id = list[i];
+      probe_ray(v, id, probe);
+      // Rows of box[6][N]: near plane lo (row a) or hi (row 3 + a) by the direction's sign.
+      const uint32_t oct = v.meta[id];
+      const uint32_t nx = (oct & 1) * 3 * N, ny = (oct >> 1 & 1) * 3 * N, nz = (oct >> 2 & 1) * 3 * N;
+      const f ox = SN::set1(v.ox[id]), oy = SN::set1(v.oy[id]), oz = SN::set1(v.oz[id]);
+      const f tnx = SN::mul(SN::sub(SN::load(b + nx), ox), SN::set1(v.ix[id]));
+      const f tny = SN::mul(SN::sub(SN::load(b + N + ny), oy), SN::set1(v.iy[id]));
+      const f tnz = SN::mul(SN::sub(SN::load(b + 2 * N + nz), oz), SN::set1(v.iz[id]));
+      const f tfx = SN::mul(SN::sub(SN::load(b + 3 * N - nx), ox), SN::set1(v.fx[id]));
+      const f tfy = SN::mul(SN::sub(SN::load(b + 4 * N - ny), oy), SN::set1(v.fy[id]));
+      const f tfz = SN::mul(SN::sub(SN::load(b + 5 * N - nz), oz), SN::set1(v.fz[id]));
+      const f tn = SN::max(tnz, SN::max(tny, SN::max(tnx, SN::set1(v.tmin[id]))));
+      const f tf = SN::min(tfz, SN::min(tfy, SN::min(tfx, SN::set1(v.hits[id].t))));
+      const f enter = SN::le(tn, tf);
+      dsum = SN::add(dsum, SN::and_(tn, enter));
+      const unsigned mk = unsigned(SN::mask(enter));
+      masks[i] = uint8_t(mk);
+      active |= mk;
+    }
+    if (!active) continue;
+    // Distribute the rays over the lanes of the children they entered. The task's own lane is
+    // packed last and in place: its output never overtakes its input.
+    uint32_t cnt[N] = {};
+    const unsigned own = 1u << t.lane;
+    for (unsigned todo = active; todo;) {
+      const unsigned c = (todo & ~own) ? unsigned(std::countr_zero(todo & ~own)) : t.lane;
+      todo &= ~(1u << c);
+      uint16_t* dst = lane[c] + head[c];
+      cnt[c] = pack_lane(list, masks, t.count, c, dst);
+      if constexpr (P::enabled)
+        for (uint32_t j = 0; j < cnt[c]; ++j) probe.write(&dst[j], sizeof(uint16_t));
+      head[c] += cnt[c];
+    }
+    if (!(active & (active - 1))) {
+      const int c = std::countr_zero(active);
+      tasks[ntasks] = {nd.ref[c], uint32_t(c), cnt[c]};
+      probe.write(&tasks[ntasks++], sizeof(Task));
+      continue;
+    }
+    // Several children: the nearest (smallest summed entry distance) is popped first.
+    alignas(32) int32_t keys[N];
+    if constexpr (N == 4) {
+      const __m128 act = _mm_castsi128_ps(
+          _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(cnt)), _mm_setzero_si128()));
+      _mm_store_si128(reinterpret_cast<__m128i*>(keys), mbvh_simd::sort4(mbvh_simd::sort_keys4(dsum, act)));
+    } else {
+      const __m256 act = _mm256_castsi256_ps(
+          _mm256_cmpgt_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt)), _mm256_setzero_si256()));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(dsum, act)));
+    }
+    for (int j = std::popcount(active) - 1; j >= 0; --j) {
+      const uint32_t c = uint32_t(keys[j]) & (N - 1);
+      tasks[ntasks] = {nd.ref[c], c, cnt[c]};
+      probe.write(&tasks[ntasks++], sizeof(Task));
+      // The farther children wait on the stack: start fetching their node or first block.
+      if (j > 0) {
+        const uint32_t ref = nd.ref[c];
+        const char* p = mbvh_ref::is_leaf(ref) ? reinterpret_cast<const char*>(blocks + mbvh_ref::first_block(ref))
+                                               : reinterpret_cast<const char*>(nodes + ref);
+        _mm_prefetch(p, _MM_HINT_T0);
+        _mm_prefetch(p + 64, _MM_HINT_T0);
+      }
+    }
+  }
+}
+
+}  // namespace tb::mbvh_stream
