@@ -227,17 +227,26 @@ def plot_scaling(path):
 
 def plot_build(path):
     rows = read(path)
-    labels = [f'{r["structure"]} {r.get("triangles", "")}' for r in rows]
-    fig, ax = plt.subplots(figsize=(max(7, len(rows) * 0.5), 4.8))
-    ax.bar(range(len(rows)), [num(r, "build_ms") for r in rows], color="#4292c6", label="travbench / Embree")
+    labels = [f'{r["structure"]} {r.get("triangles", "")} tris, {r.get("threads", "1")} thr' for r in rows]
+    fig, ax = plt.subplots(figsize=(max(7, len(rows) * 0.5), 5.2))
+    ax.bar(range(len(rows)), [num(r, "build_ms") for r in rows], color="#4292c6", label="build (travbench / Embree)")
+    refit = [(i, num(r, "refit_ms")) for i, r in enumerate(rows) if not math.isnan(num(r, "refit_ms"))]
+    if refit:
+        ax.scatter([p[0] for p in refit], [p[1] for p in refit], marker="_", s=200, color="#d94801", zorder=3,
+                   label="refit")
     th = [(i, num(r, "thesis_ms")) for i, r in enumerate(rows)]
     th = [p for p in th if not math.isnan(p[1])]
     if th:
         ax.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
+    tr = [(i, num(r, "thesis_refit_ms")) for i, r in enumerate(rows) if not math.isnan(num(r, "thesis_refit_ms"))]
+    if tr:
+        ax.scatter([p[0] for p in tr], [p[1] for p in tr], marker="D", facecolors="none", edgecolors="#d94801",
+                   label="thesis refit")
     ax.set_yscale("log")
     ax.set_xticks(range(len(rows)))
     ax.set_xticklabels(labels, rotation=60, fontsize=7)
-    finish(fig, ax, path.with_suffix(".png"), "build and refit times (thesis Table 1)", "ms (log)", thesis=bool(th))
+    finish(fig, ax, path.with_suffix(".png"), "build and refit times, 1 thread unless marked (thesis Table 1)",
+           "ms (log)", thesis=bool(th))
 
 
 PLOTTERS = {

@@ -36,7 +36,9 @@ while [ $# -gt 0 ]; do
 done
 [ ${#scenes[@]} -eq 0 ] && [ $scaling -eq 0 ] && scenes=(room)
 scripts/setup.sh
-scripts/build.sh >/dev/null
+buildlog=$(mktemp)
+scripts/build.sh >"$buildlog" 2>&1 || { tail -30 "$buildlog" >&2; rm -f "$buildlog"; exit 1; }
+rm -f "$buildlog"
 TB=build/travbench
 if [ $quick -eq 1 ]; then
   big=(--width 128 --height 128 --reps 1); small=(--width 64 --height 64 --reps 1)

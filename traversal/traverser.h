@@ -36,8 +36,12 @@ class Traverser {
   virtual void trace(const RayBatch& batch, PacketRange range, std::span<Hit> hits, Probe& probe) const = 0;
   // One line describing the built structure (nodes, bytes, ...), for logs and the build table.
   virtual std::string structure_info() const { return {}; }
-  // Bytes of the scheme's acceleration structure and triangle data (0 when not known, e.g. Embree).
+  // Bytes of the scheme's acceleration structure and triangle data (Embree: from its memory monitor).
   virtual size_t structure_bytes() const { return 0; }
+  // Rays per trace() call below which the scheme loses efficiency (batch schemes that queue rays
+  // by region need many rays per call); multi-threaded runs hand out chunks of at least this size
+  // while keeping every thread busy. 0: any chunk size is fine.
+  virtual uint32_t preferred_chunk_rays() const { return 0; }
 };
 
 // Implements both trace entry points with one template: Derived provides
