@@ -55,7 +55,8 @@ def grouped_bars(ax, rows, group_key, groups, schemes, value_key, thesis_key=Non
             xs.append(i + (j - (len(schemes) - 1) / 2) * width)
             ys.append(num(match[0], value_key))
             ts.append(num(match[0], thesis_key) if thesis_key else math.nan)
-        ax.bar(xs, ys, width, label=s, color=colour(s))
+        layout = next((r.get("layout") for r in rows if r["scheme"] == s and r.get("layout")), "")
+        ax.bar(xs, ys, width, label=f"{s} ({layout})" if layout else s, color=colour(s))
         pts = [(x, t) for x, t in zip(xs, ts) if not math.isnan(t)]
         if pts:
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], facecolors="none", edgecolors="black",

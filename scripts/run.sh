@@ -3,10 +3,11 @@
 #   scripts/run.sh [--quick] [--scaling] [--steps LIST] [SCENE|FOLDER ...]
 # SCENE: a built-in name (default: room) or a scene file path (e.g. ../shared/scenes/sponza.obj);
 # FOLDER: every scene file in it (e.g. ../shared/scenes).
-# The default suite takes ~10 minutes per scene on 2 cores; --quick takes ~1 minute (small images,
-# 1 rep). --steps picks a subset of run,divergence,bounce,raygrid,cache,accuracy,build (default:
-# all). --scaling adds the scaling table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory)
-# under results/spheres/. Ends with the performance-goal ratios of each scene (scripts/goals.py).
+# The default suite takes 4-8 minutes per scene on 2 cores (measured: room 4; Sponza and Conference
+# 11 together); --quick ~1 minute (small images, 1 rep). --steps picks a subset of
+# run,divergence,bounce,raygrid,cache,accuracy,build (default: all). --scaling adds the scaling
+# table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory) under results/spheres/.
+# Ends with the performance-goal ratios of each scene (scripts/goals.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=0
@@ -18,7 +19,7 @@ while [ $# -gt 0 ]; do
     --quick) quick=1 ;;
     --scaling) scaling=1 ;;
     --steps) want=${2:?--steps needs a list}; shift ;;
-    -h|--help) sed -n 2,9p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,10p "$0"; exit 0 ;;
     -*) echo "run.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
     *)
       if [ -d "$1" ]; then
