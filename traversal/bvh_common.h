@@ -10,8 +10,11 @@ namespace tb {
 struct BVHData {
   std::shared_ptr<const BVH> bvh;
   std::shared_ptr<const TriangleSet> tris;
-  // Bytes of the nodes plus the leaf-ordered triangles (what a traversal reads).
-  size_t bytes() const { return bvh->stats.bytes + tris->size() * (sizeof(TriVerts) + sizeof(uint32_t)); }
+  // Bytes of the nodes plus the leaf-ordered triangles in kernel k's layout (what a traversal
+  // reads; as mbvh_bytes counts the MBVH schemes).
+  size_t bytes(TriKernel k) const {
+    return bvh->stats.bytes + tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t));
+  }
 };
 
 // BVH build parameters from a scheme's config: `bins`, `leaf_size`.

@@ -29,7 +29,7 @@ class BVHMasked final : public TraverserBase<BVHMasked> {
     data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
   }
   std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {

@@ -37,7 +37,7 @@ class BVHPartition final : public TraverserBase<BVHPartition> {
     data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
   }
   std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {

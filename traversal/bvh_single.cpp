@@ -14,7 +14,7 @@ class BVHSingle final : public TraverserBase<BVHSingle> {
     data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
   }
   std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
