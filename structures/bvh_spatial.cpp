@@ -1,0 +1,392 @@
+#include "structures/bvh_spatial.h"
+
+#include <algorithm>
+#include <bit>
+#include <limits>
+#include <chrono>
+#include <cmath>
+
+
+namespace tb {
+namespace {
+
+struct Bin {
+  AABB box;
+  uint32_t count = 0;  // object bins: references; spatial bins: entries
+  uint32_t exits = 0;  // spatial bins: references whose last bin this is
+};
+
+struct Split {
+  enum Kind { none, object, spatial } kind = none;
+  int axis = -1;
+  int pos = 0;  // object: first bin of the right side; spatial: plane index
+  float cost = INFINITY;  // A_L * N_L + A_R * N_R
+  AABB left, right;
+};
+
+AABB intersect(const AABB& a, const AABB& b) {
+  AABB r;
+  r.lo = vmax(a.lo, b.lo);
+  r.hi = vmin(a.hi, b.hi);
+  return r;
+}
+
+// One float step down/up for finite values (std::nextafter is a libm call; this is the hot loop).
+inline float step_down(float f) {
+  if (f == 0.f) return -std::numeric_limits<float>::denorm_min();
+  uint32_t u = std::bit_cast<uint32_t>(f);
+  return std::bit_cast<float>(f > 0.f ? u - 1 : u + 1);
+}
+inline float step_up(float f) { return -step_down(-f); }
+inline float round_down(double x) {
+  const float f = float(x);
+  return double(f) > x ? step_down(f) : f;
+}
+inline float round_up(double x) {
+  const float f = float(x);
+  return double(f) < x ? step_up(f) : f;
+}
+
+// Bounds of triangle v's parts on either side of the plane x[axis] = pos: its vertices on each
+// side plus the points where its edges cross the plane. A crossing is computed in double and
+// widened by far more than its rounding error before rounding outward to float (the rule of the
+// kD-tree's clipper, clip_triangle_bounds), so each box contains its part exactly.
+inline void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AABB& right) {
+  left = right = AABB{};
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 &p = v[i], &q = v[(i + 1) % 3];
+    if (p[axis] <= pos) left.grow(p);
+    if (p[axis] >= pos) right.grow(p);
+    if ((p[axis] < pos && q[axis] > pos) || (p[axis] > pos && q[axis] < pos)) {
+      const double t = (double(pos) - p[axis]) / (double(q[axis]) - p[axis]);
+      AABB x;
+      for (int k = 0; k < 3; ++k) {
+        if (k == axis) {
+          x.lo[k] = x.hi[k] = pos;
+          continue;
+        }
+        const double c = double(p[k]) + t * (double(q[k]) - p[k]);
+        const double margin = std::max(std::fabs(double(p[k])), std::fabs(double(q[k]))) * 1e-13;
+        x.lo[k] = std::max(round_down(c - margin), std::min(p[k], q[k]));
+        x.hi[k] = std::min(round_up(c + margin), std::max(p[k], q[k]));
+      }
+      left.grow(x);
+      right.grow(x);
+    }
+  }
+}
+
+struct Task {
+  uint32_t node, depth;
+  std::vector<SpatialRef> refs;
+};
+
+class SpatialBuilder {
+ public:
+  SpatialBuilder(const Scene& scene, const BVHBuildParams& p, const SpatialSplitParams& sp, size_t n)
+      : scene_(scene), p_(p), sp_(sp), obins_(std::clamp(p.bins, 2, 256)),
+        sbins_(std::clamp(sp.spatial_bins, 2, 256)), max_leaf_(uint32_t(std::max(1, p.max_leaf))),
+        budget_(size_t(double(std::max(0.f, sp.budget)) * double(n))) {}
+
+  BVH run(std::vector<SpatialRef> refs) {
+    BVH bvh;
+    AABB root;
+    for (const auto& r : refs) root.grow(r.box);
+    root_area_ = std::max(root.area(), 1e-30f);
+    bvh.nodes.resize(2);
+    bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(refs.size())};
+    bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
+    bvh.prim_index.reserve(refs.size() + refs.size() / 4);
+    std::vector<Task> stack;
+    stack.push_back({0, 0, std::move(refs)});
+    while (!stack.empty()) {
+      Task t = std::move(stack.back());
+      stack.pop_back();
+      bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth);
+      const AABB box{bvh.nodes[t.node].lo, bvh.nodes[t.node].hi};
+      std::vector<SpatialRef> left, right;
+      if (!split(t.refs, box, left, right)) {
+        BVHNode& n = bvh.nodes[t.node];
+        n.left_first = uint32_t(bvh.prim_index.size());
+        n.count = uint32_t(t.refs.size());
+        for (const auto& r : t.refs) bvh.prim_index.push_back(r.prim);
+        continue;
+      }
+      const uint32_t l = uint32_t(bvh.nodes.size());
+      AABB lb, rb;
+      for (const auto& r : left) lb.grow(r.box);
+      for (const auto& r : right) rb.grow(r.box);
+      bvh.nodes.push_back({lb.lo, 0, lb.hi, uint32_t(left.size())});
+      bvh.nodes.push_back({rb.lo, 0, rb.hi, uint32_t(right.size())});
+      bvh.nodes[t.node].left_first = l;
+      bvh.nodes[t.node].count = 0;
+      t.refs.clear();
+      t.refs.shrink_to_fit();
+      stack.push_back({l + 1, t.depth + 1, std::move(right)});
+      stack.push_back({l, t.depth + 1, std::move(left)});
+    }
+    return bvh;
+  }
+
+ private:
+  // Splits refs into left/right, or returns false for a leaf.
+  bool split(std::vector<SpatialRef>& refs, const AABB& box, std::vector<SpatialRef>& left,
+             std::vector<SpatialRef>& right) {
+    const uint32_t count = uint32_t(refs.size());
+    if (count <= 1) return false;
+    Split best = object_split(refs);
+    // Spatial splits only where the object split's children overlap noticeably (Stich §4.3) and
+    // the duplication budget is not spent.
+    if (used_ < budget_ && count >= uint32_t(sp_.min_refs) && (best.kind == Split::none ||
+                            intersect(best.left, best.right).area() > sp_.alpha * root_area_)) {
+      const Split s = spatial_split(refs, box);
+      if (s.cost < best.cost) best = s;
+    }
+    const float parent_area = std::max(box.area(), 1e-30f);
+    const float split_cost = p_.cost_traversal + p_.cost_intersect * best.cost / parent_area;
+    const float leaf_cost = p_.cost_intersect * float(count);
+    if (count <= max_leaf_ && (best.kind == Split::none || split_cost >= leaf_cost)) return false;
+    if (best.kind == Split::spatial) {
+      do_spatial(refs, box, best, left, right);
+      // A split that could not separate anything (all references straddle and every one was
+      // kept on both sides) would recurse forever: fall back to the object split.
+      if (left.size() < count && right.size() < count && !left.empty() && !right.empty()) return true;
+      used_ -= std::min(used_, left.size() + right.size() - count);
+      left.clear();
+      right.clear();
+      best = object_split(refs);
+    }
+    if (best.kind == Split::object) {
+      const int a = best.axis;
+      const AABB cb = centroid_bounds(refs);
+      const float scale = obins_ / (cb.hi[a] - cb.lo[a]);
+      for (auto& r : refs)
+        (obin(r, cb.lo[a], scale, a) < best.pos ? left : right).push_back(r);
+      if (!left.empty() && !right.empty()) return true;
+      left.clear();
+      right.clear();
+    }
+    // No usable split (coincident centroids) but too many references for one leaf: halve.
+    left.assign(refs.begin(), refs.begin() + count / 2);
+    right.assign(refs.begin() + count / 2, refs.end());
+    return true;
+  }
+
+  static AABB centroid_bounds(const std::vector<SpatialRef>& refs) {
+    AABB cb;
+    for (const auto& r : refs) cb.grow(r.box.centre());
+    return cb;
+  }
+  int obin(const SpatialRef& r, float lo, float scale, int a) const {
+    return std::clamp(int((r.box.centre()[a] - lo) * scale), 0, obins_ - 1);
+  }
+
+  // Binned SAH over reference centroids (Wald 2007), as structures/bvh.cpp.
+  Split object_split(const std::vector<SpatialRef>& refs) {
+    Split best;
+    const AABB cb = centroid_bounds(refs);
+    std::vector<Bin>& bins = bins_;
+    for (int a = 0; a < 3; ++a) {
+      const float ext = cb.hi[a] - cb.lo[a];
+      if (!(ext > 0.f)) continue;
+      const float scale = obins_ / ext;
+      bins.assign(obins_, Bin{});
+      for (const auto& r : refs) {
+        Bin& b = bins[obin(r, cb.lo[a], scale, a)];
+        b.box.grow(r.box);
+        b.count++;
+      }
+      sweep(bins, a, Split::object, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.count; });
+    }
+    return best;
+  }
+
+  // Sweeps bins for the cheapest plane; `enter(b)` counts references on the left of a plane after
+  // bin b, `leave(b)` those on the right before it.
+  template <class Enter, class Leave>
+  void sweep(const std::vector<Bin>& bins, int axis, Split::Kind kind, Split& best, Enter enter, Leave leave) {
+    const int nb = int(bins.size());
+    right_area_.resize(nb);
+    right_count_.resize(nb);
+    AABB acc;
+    uint32_t c = 0;
+    for (int i = nb - 1; i > 0; --i) {
+      acc.grow(bins[i].box);
+      c += leave(bins[i]);
+      right_area_[i] = acc.area();
+      right_count_[i] = c;
+    }
+    acc = AABB{};
+    c = 0;
+    for (int i = 0; i < nb - 1; ++i) {
+      acc.grow(bins[i].box);
+      c += enter(bins[i]);
+      if (c == 0 || right_count_[i + 1] == 0) continue;
+      const float cost = acc.area() * float(c) + right_area_[i + 1] * float(right_count_[i + 1]);
+      if (cost < best.cost) {
+        best.kind = kind;
+        best.cost = cost;
+        best.axis = axis;
+        best.pos = i + 1;
+        best.left = acc;
+        // The right box is recomputed when needed (only the object split's is read, for overlap).
+        AABB r;
+        for (int k = i + 1; k < nb; ++k) r.grow(bins[k].box);
+        best.right = r;
+      }
+    }
+  }
+
+  // Plane k of the spatial bins of `box` on `axis`: the same float for binning and splitting.
+  float plane(const AABB& box, int axis, int k) const {
+    if (k >= sbins_) return box.hi[axis];
+    return box.lo[axis] + (box.hi[axis] - box.lo[axis]) * (float(k) / float(sbins_));
+  }
+  int sbin(const AABB& box, int axis, float x) const {
+    const float ext = box.hi[axis] - box.lo[axis];
+    int k = std::clamp(int((x - box.lo[axis]) / ext * float(sbins_)), 0, sbins_ - 1);
+    // Agree with plane(): x belongs to bin k when plane(k) <= x < plane(k + 1).
+    while (k > 0 && x < plane(box, axis, k)) --k;
+    while (k < sbins_ - 1 && x >= plane(box, axis, k + 1)) ++k;
+    return k;
+  }
+  // Bounds of the parts of r's triangle below and above x[axis] = pos, within r's box.
+  void split_ref(const SpatialRef& r, int axis, float pos, AABB& left, AABB& right) const {
+    const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
+    split_ref(v, r.box, axis, pos, left, right);
+  }
+  static void split_ref(const Vec3 v[3], const AABB& box, int axis, float pos, AABB& left, AABB& right) {
+    split_triangle_bounds(v, axis, pos, left, right);
+    left = intersect(left, box);
+    right = intersect(right, box);
+  }
+
+  // Chopped binning (Stich et al. §4.1): a reference enters its first bin and exits its last;
+  // in every bin it spans it adds the bounds of its part clipped to that bin.
+  Split spatial_split(const std::vector<SpatialRef>& refs, const AABB& box) {
+    Split best;
+    std::vector<Bin>& bins = bins_;
+    for (int a = 0; a < 3; ++a) {
+      if (!(box.hi[a] - box.lo[a] > 0.f)) continue;
+      bins.assign(sbins_, Bin{});
+      for (const auto& r : refs) {
+        const int b0 = sbin(box, a, r.box.lo[a]), b1 = sbin(box, a, r.box.hi[a]);
+        bins[b0].count++;
+        bins[b1].exits++;
+        if (b0 == b1) {
+          bins[b0].box.grow(r.box);
+          continue;
+        }
+        // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
+        // same way): the part left of plane b + 1 goes to bin b, the rest carries on.
+        const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
+        AABB rest = r.box;
+        for (int b = b0; b < b1; ++b) {
+          AABB l, rr;
+          split_ref(v, rest, a, plane(box, a, b + 1), l, rr);
+          if (!l.empty()) bins[b].box.grow(l);
+          rest = rr;
+          if (rr.empty()) break;
+        }
+        if (!rest.empty()) bins[b1].box.grow(rest);
+      }
+      sweep(bins, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
+    }
+    return best;
+  }
+
+  // Distributes references for a spatial split; a straddling reference is split, or kept whole on
+  // one side when that is cheaper ("reference unsplitting", Stich et al. §4.2).
+  void do_spatial(const std::vector<SpatialRef>& refs, const AABB& box, const Split& s, std::vector<SpatialRef>& left,
+                  std::vector<SpatialRef>& right) {
+    const int a = s.axis;
+    const float x = plane(box, a, s.pos);
+    AABB lb, rb;
+    std::vector<const SpatialRef*> straddle;
+    for (const auto& r : refs) {
+      const int b0 = sbin(box, a, r.box.lo[a]), b1 = sbin(box, a, r.box.hi[a]);
+      if (b1 < s.pos) {
+        left.push_back(r);
+        lb.grow(r.box);
+      } else if (b0 >= s.pos) {
+        right.push_back(r);
+        rb.grow(r.box);
+      } else {
+        straddle.push_back(&r);
+      }
+    }
+    // Counts and boxes as if every straddler were split, then each straddler decides.
+    float nl = float(left.size() + straddle.size()), nr = float(right.size() + straddle.size());
+    std::vector<AABB> lparts(straddle.size()), rparts(straddle.size());
+    for (size_t i = 0; i < straddle.size(); ++i) {
+      split_ref(*straddle[i], a, x, lparts[i], rparts[i]);
+      lb.grow(lparts[i]);
+      rb.grow(rparts[i]);
+    }
+    for (size_t i = 0; i < straddle.size(); ++i) {
+      const SpatialRef& r = *straddle[i];
+      const bool lempty = lparts[i].empty(), rempty = rparts[i].empty();
+      if (lempty || rempty) {  // the clipper found no part on one side: the reference is one-sided
+        if (!lempty) left.push_back({lparts[i], r.prim}), nr -= 1;
+        else if (!rempty) right.push_back({rparts[i], r.prim}), nl -= 1;
+        else left.push_back(r), nr -= 1;  // cannot happen for a reference inside the node's box
+        continue;
+      }
+      const float c_split = lb.area() * nl + rb.area() * nr;
+      AABB l1 = lb, r2 = rb;
+      l1.grow(r.box);
+      r2.grow(r.box);
+      const float c_left = l1.area() * nl + rb.area() * (nr - 1);
+      const float c_right = lb.area() * (nl - 1) + r2.area() * nr;
+      if (c_left < c_split && c_left <= c_right) {
+        left.push_back(r);
+        lb = l1;
+        nr -= 1;
+      } else if (c_right < c_split) {
+        right.push_back(r);
+        rb = r2;
+        nl -= 1;
+      } else {
+        left.push_back({lparts[i], r.prim});
+        right.push_back({rparts[i], r.prim});
+        used_++;
+      }
+    }
+  }
+
+  const Scene& scene_;
+  const BVHBuildParams& p_;
+  const SpatialSplitParams& sp_;
+  const int obins_, sbins_;
+  const uint32_t max_leaf_;
+  const size_t budget_;
+  size_t used_ = 0;
+  float root_area_ = 1.f;
+  std::vector<Bin> bins_;
+  std::vector<float> right_area_;
+  std::vector<uint32_t> right_count_;
+};
+
+}  // namespace
+
+BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BVHBuildParams& params,
+                      const SpatialSplitParams& sp) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const size_t n = refs.size();
+  BVH bvh = SpatialBuilder(scene, params, sp, n).run(std::move(refs));
+  bvh.stats.nodes = uint32_t(bvh.nodes.size() - 1);
+  for (size_t i = 0; i < bvh.nodes.size(); ++i)
+    if (i != 1 && bvh.nodes[i].is_leaf()) bvh.stats.leaves++;
+  bvh.stats.bytes = bvh.nodes.size() * sizeof(BVHNode) + bvh.prim_index.size() * sizeof(uint32_t);
+  bvh.stats.sah_cost = bvh.compute_sah_cost(params);
+  bvh.stats.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return bvh;
+}
+
+BVH build_spatial_bvh(const Scene& scene, const BVHBuildParams& params, const SpatialSplitParams& sp) {
+  std::vector<SpatialRef> refs(scene.num_triangles());
+  for (uint32_t i = 0; i < refs.size(); ++i) refs[i] = {scene.triangle_bounds(i), i};
+  return build_spatial_bvh(scene, std::move(refs), params, sp);
+}
+
+}  // namespace tb

@@ -1,0 +1,53 @@
+// Spatial-split BVH ("SBVH", Stich, Friedrich and Dietrich 2009, "Spatial Splits in Bounding
+// Volume Hierarchies"): the binned SAH builder of structures/bvh.cpp extended by splits that cut
+// space instead of the primitive list. A triangle straddling the chosen plane is clipped to each
+// side and referenced by both children, so large or long triangles stop inflating the boxes of
+// everything near them (Sponza's floor and walls, a scanned model on a huge ground quad).
+//
+// The output is an ordinary BVH (same nodes, same sibling-pair layout): leaves index
+// `prim_index`, whose entries are the scene's triangle ids and may repeat — a triangle is stored
+// once per leaf that references it. Every traversal that reads a BVH (binary, packets, MBVH
+// collapse, stream kernels) works on it unchanged; a closest-hit query may test a duplicated
+// triangle twice, which gives the same answer.
+//
+// Watertightness: a child reference's box is the bounds of the triangle clipped to the parent
+// reference's box and the half-space of its side, computed by the shared clipper
+// (clip_triangle_bounds: double-precision Sutherland-Hodgman rounded outward), so the union of
+// the two parts' boxes contains the whole part of the triangle inside the parent's box. Node boxes
+// are the unions of their references' boxes. Every point of a triangle therefore lies in the box
+// of some leaf that references it and in all of that leaf's ancestors.
+#pragma once
+#include <span>
+#include <vector>
+
+#include "structures/bvh.h"
+#include "structures/scene.h"
+
+namespace tb {
+
+struct SpatialSplitParams {
+  // Spatial splits are tried only in nodes whose best object split leaves the children
+  // overlapping by more than alpha * (root surface area) (Stich et al. §4.3: 1e-5 keeps the
+  // build fast and loses almost nothing).
+  float alpha = 1e-5f;
+  // At most budget * (triangles) extra references in the whole tree (Embree caps growth the same
+  // way); once spent, only object splits are made.
+  float budget = 1.0f;
+  int spatial_bins = 16;  // spatial bins per axis (object splits use BVHBuildParams::bins)
+  int min_refs = 0;       // nodes with fewer references make object splits only
+};
+
+// One reference: a (possibly clipped) box around part of triangle `prim`.
+struct SpatialRef {
+  AABB box;
+  uint32_t prim;
+};
+
+// Spatial-split build over the whole scene.
+BVH build_spatial_bvh(const Scene& scene, const BVHBuildParams& params, const SpatialSplitParams& sp = {});
+// Over given references (e.g. triangles already clipped to an octree cell): the boxes are the
+// starting bounds; clipping uses the scene's triangles.
+BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BVHBuildParams& params,
+                      const SpatialSplitParams& sp = {});
+
+}  // namespace tb

@@ -1,0 +1,159 @@
+// Spatial-split BVH (Stich et al. 2009) invariants: every point of every triangle lies in the box
+// of a leaf that references the triangle and in all of that leaf's ancestors (so no ray can miss
+// it by culling), leaves respect the size limit, duplication stays within the budget, and the SAH
+// cost drops on scenes with large triangles among small ones.
+#include <random>
+
+#include "structures/builtin_scenes.h"
+#include "structures/bvh_spatial.h"
+#include "test_util.h"
+
+namespace tb {
+namespace {
+
+// A few huge triangles (ground quad, a wall) among many small ones: the shape spatial splits are for.
+Scene small_on_large(uint32_t n, uint32_t seed, Vec3 offset = {0, 0, 0}) {
+  Scene s;
+  s.name = "small_on_large";
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(-1.f, 1.f), E(-0.02f, 0.02f);
+  auto add = [&](Vec3 a, Vec3 b, Vec3 c) {
+    const uint32_t k = uint32_t(s.positions.size());
+    for (Vec3 v : {a, b, c}) s.positions.push_back(v + offset);
+    s.triangles.push_back({k, k + 1, k + 2});
+  };
+  add({-100, 0, -100}, {100, 0, -100}, {100, 0, 100});
+  add({-100, 0, -100}, {100, 0, 100}, {-100, 0, 100});
+  add({-100, 0, 5}, {100, 0, 5}, {100, 50, 5});
+  // Long thin diagonal slivers across the small ones.
+  for (int i = 0; i < 8; ++i) add({-50, 0.1f * i, -50}, {50, 0.1f * i + 0.01f, 50}, {50, 0.1f * i, 50.1f});
+  for (uint32_t i = 0; i < n; ++i) {
+    Vec3 c{U(rng), std::fabs(U(rng)), U(rng)};
+    add(c + Vec3{E(rng), E(rng), E(rng)}, c + Vec3{E(rng), E(rng), E(rng)}, c + Vec3{E(rng), E(rng), E(rng)});
+  }
+  s.ensure_views();
+  return s;
+}
+
+// Leaf ancestors: for each leaf, the chain of boxes from the root.
+struct Walk {
+  const BVH& bvh;
+  std::vector<std::vector<uint32_t>> leaves_of;  // triangle -> leaves referencing it
+  std::vector<uint32_t> parent;
+  explicit Walk(const BVH& b, size_t ntris) : bvh(b), leaves_of(ntris), parent(b.nodes.size(), UINT32_MAX) {
+    std::vector<uint32_t> stack{0};
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      const BVHNode& n = bvh.nodes[i];
+      if (n.is_leaf()) {
+        for (uint32_t k = n.left_first; k < n.left_first + n.count; ++k) leaves_of[bvh.prim_index[k]].push_back(i);
+      } else {
+        for (uint32_t c = n.left_first; c < n.left_first + 2; ++c) parent[c] = i, stack.push_back(c);
+      }
+    }
+  }
+  bool covered(uint32_t tri, Vec3 p) const {
+    for (uint32_t leaf : leaves_of[tri]) {
+      bool in = true;
+      for (uint32_t i = leaf; i != UINT32_MAX && in; i = parent[i]) {
+        const BVHNode& n = bvh.nodes[i];
+        in = n.lo.x <= p.x && p.x <= n.hi.x && n.lo.y <= p.y && p.y <= n.hi.y && n.lo.z <= p.z && p.z <= n.hi.z;
+      }
+      if (in) return true;
+    }
+    return false;
+  }
+};
+
+void check_spatial(const Scene& s, const BVH& bvh, int max_leaf, const SpatialSplitParams& sp) {
+  const Walk w(bvh, s.num_triangles());
+  uint32_t leaves = 0;
+  for (size_t i = 0; i < bvh.nodes.size(); ++i) {
+    if (i == 1) continue;
+    const BVHNode& n = bvh.nodes[i];
+    if (n.is_leaf()) {
+      ++leaves;
+      EXPECT_LE(int(n.count), max_leaf);
+    } else {
+      for (uint32_t c = n.left_first; c < n.left_first + 2; ++c)
+        EXPECT_TRUE((AABB{n.lo, n.hi}.contains(AABB{bvh.nodes[c].lo, bvh.nodes[c].hi})));
+    }
+  }
+  EXPECT_EQ(leaves, bvh.stats.leaves);
+  // Duplicates within the budget (one spatial split may overshoot by the references it splits).
+  EXPECT_LE(bvh.prim_index.size(), size_t(double(s.num_triangles()) * (1.0 + sp.budget) * 1.05 + 64));
+  // Vertices, edge points and interior points of every triangle are covered.
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> U(0.f, 1.f);
+  // Large scenes: a deterministic sample of triangles (every one is referenced, checked below).
+  const uint32_t stride = std::max<uint32_t>(1, uint32_t(s.num_triangles() / 3000));
+  for (uint32_t t = 0; t < s.num_triangles(); ++t) ASSERT_FALSE(w.leaves_of[t].empty()) << "triangle " << t;
+  for (uint32_t t = 0; t < s.num_triangles(); t += stride) {
+    ASSERT_FALSE(w.leaves_of[t].empty()) << "triangle " << t << " not referenced";
+    const Vec3 a = s.vertex(t, 0), b = s.vertex(t, 1), c = s.vertex(t, 2);
+    std::vector<Vec3> pts{a, b, c, (a + b) * 0.5f, (b + c) * 0.5f, (c + a) * 0.5f};
+    for (int k = 0; k < 24; ++k) {
+      float u = U(rng), v = U(rng);
+      if (u + v > 1.f) u = 1.f - u, v = 1.f - v;
+      pts.push_back(a + (b - a) * u + (c - a) * v);
+      const float e = U(rng);  // a point on an edge
+      pts.push_back(k % 3 == 0 ? a + (b - a) * e : k % 3 == 1 ? b + (c - b) * e : c + (a - c) * e);
+    }
+    for (const Vec3& p : pts) ASSERT_TRUE(w.covered(t, p)) << "triangle " << t << " point " << p.x << "," << p.y << "," << p.z;
+  }
+}
+
+TEST(SpatialBVH, CoversEveryTriangleAndLowersSah) {
+  const Scene s = small_on_large(4000, 11);
+  BVHBuildParams p;
+  p.max_leaf = 4;
+  const SpatialSplitParams sp;
+  const BVH plain = BVH::build(s, p);
+  const BVH sbvh = build_spatial_bvh(s, p, sp);
+  check_spatial(s, sbvh, p.max_leaf, sp);
+  EXPECT_GT(sbvh.prim_index.size(), s.num_triangles()) << "no spatial split was made";
+  EXPECT_LT(sbvh.stats.sah_cost, plain.stats.sah_cost * 0.9);
+}
+
+TEST(SpatialBVH, ZeroBudgetIsAnObjectSplitBvh) {
+  const Scene s = small_on_large(1500, 5);
+  BVHBuildParams p;
+  SpatialSplitParams sp;
+  sp.budget = 0;
+  const BVH b = build_spatial_bvh(s, p, sp);
+  EXPECT_EQ(b.prim_index.size(), s.num_triangles());
+  check_spatial(s, b, p.max_leaf, sp);
+}
+
+TEST(SpatialBVH, HugeOffsetsAndBuiltinScenes) {
+  BVHBuildParams p;
+  const SpatialSplitParams sp;
+  check_spatial(small_on_large(800, 2, {1.5e5f, -3e5f, 1e6f}), build_spatial_bvh(small_on_large(800, 2, {1.5e5f, -3e5f, 1e6f}), p, sp), p.max_leaf, sp);
+  for (const char* name : {"room", "stadium", "sphere"}) {
+    const Scene s = make_builtin_scene(name);
+    check_spatial(s, build_spatial_bvh(s, p, sp), p.max_leaf, sp);
+  }
+}
+
+TEST(SpatialBVH, DegenerateInputs) {
+  // Coincident triangles (no object split can separate them), a zero-area triangle, one triangle.
+  Scene s;
+  s.name = "degenerate";
+  s.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {2, 2, 2}, {2, 2, 2}, {3, 3, 3}};
+  for (int i = 0; i < 40; ++i) s.triangles.push_back({0, 1, 2});
+  s.triangles.push_back({3, 4, 5});
+  s.ensure_views();
+  BVHBuildParams p;
+  const SpatialSplitParams sp;
+  check_spatial(s, build_spatial_bvh(s, p, sp), p.max_leaf, sp);
+  Scene one;
+  one.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  one.triangles = {{0, 1, 2}};
+  const BVH b = build_spatial_bvh(one, p, sp);
+  EXPECT_EQ(b.prim_index.size(), 1u);
+  EXPECT_TRUE(b.nodes[0].is_leaf());
+}
+
+}  // namespace
+}  // namespace tb
