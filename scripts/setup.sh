@@ -3,7 +3,7 @@
 set -euo pipefail
 PACKAGES=(build-essential cmake libembree-dev libtinygltf-dev libopenmesh-dev libbenchmark-dev libgtest-dev
           libcli11-dev nlohmann-json3-dev libtbb-dev python3-matplotlib valgrind
-          libgmp-dev libcgal-dev libpng-dev libassimp-dev)
+          libgmp-dev libcgal-dev libpng-dev libassimp-dev libcsv-dev)
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

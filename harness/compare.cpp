@@ -1,0 +1,308 @@
+#include "harness/compare.h"
+
+#include <csv.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "structures/scene.h"  // InputError
+
+namespace tb {
+
+// ---------------------------------------------------------------------------------------------
+// CSV input through libcsv (RFC 4180: quoted fields, doubled quotes, embedded commas).
+
+int CsvTable::column(const std::string& name) const {
+  for (size_t i = 0; i < header.size(); ++i)
+    if (header[i] == name) return int(i);
+  return -1;
+}
+
+const std::string& CsvTable::at(size_t row, int col) const {
+  static const std::string empty;
+  if (col < 0 || size_t(col) >= rows[row].size()) return empty;
+  return rows[row][size_t(col)];
+}
+
+namespace {
+
+struct CsvSink {
+  std::vector<std::vector<std::string>> rows;
+  std::vector<std::string> cur;
+};
+
+void on_field(void* s, size_t len, void* data) {
+  static_cast<CsvSink*>(data)->cur.emplace_back(static_cast<const char*>(s), len);
+}
+void on_row(int, void* data) {
+  auto* sink = static_cast<CsvSink*>(data);
+  sink->rows.push_back(std::move(sink->cur));
+  sink->cur.clear();
+}
+
+}  // namespace
+
+CsvTable read_csv(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw InputError(path + ": cannot open");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string text = ss.str();
+  csv_parser p;
+  if (csv_init(&p, CSV_STRICT | CSV_APPEND_NULL | CSV_STRICT_FINI) != 0) throw InputError(path + ": csv_init failed");
+  CsvSink sink;
+  const size_t used = csv_parse(&p, text.data(), text.size(), on_field, on_row, &sink);
+  const bool ok = used == text.size() && csv_fini(&p, on_field, on_row, &sink) == 0;
+  const std::string err = ok ? "" : csv_strerror(csv_error(&p));
+  csv_free(&p);
+  if (!ok) throw InputError(path + ": not a valid CSV (" + err + " after " + std::to_string(sink.rows.size()) + " rows)");
+  if (sink.rows.empty()) throw InputError(path + ": empty CSV (no header)");
+  CsvTable t;
+  t.header = std::move(sink.rows.front());
+  for (size_t i = 1; i < sink.rows.size(); ++i) {
+    if (sink.rows[i].size() != t.header.size())
+      throw InputError(path + ": row " + std::to_string(i + 1) + " has " + std::to_string(sink.rows[i].size()) +
+                       " fields, the header " + std::to_string(t.header.size()));
+    t.rows.push_back(std::move(sink.rows[i]));
+  }
+  return t;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mann-Whitney U
+
+std::optional<double> mann_whitney_p(const std::vector<double>& a, const std::vector<double>& b) {
+  const size_t n1 = a.size(), n2 = b.size();
+  if (n1 == 0 || n2 == 0) return std::nullopt;
+  // U of sample a: pairs where a wins, ties count one half.
+  double u = 0;
+  bool ties = false;
+  for (double x : a)
+    for (double y : b) {
+      if (x > y) u += 1;
+      else if (x == y) u += 0.5, ties = true;
+    }
+  // Ties inside a sample matter for the variance too.
+  std::vector<double> all(a);
+  all.insert(all.end(), b.begin(), b.end());
+  std::sort(all.begin(), all.end());
+  double tie_term = 0;
+  for (size_t i = 0; i < all.size();) {
+    size_t j = i;
+    while (j < all.size() && all[j] == all[i]) ++j;
+    const double t = double(j - i);
+    if (t > 1) ties = true, tie_term += t * t * t - t;
+    i = j;
+  }
+  const size_t cells = n1 * n2;
+  if (!ties && cells <= 400) {
+    // Null distribution of U by counting: f(n1, n2, u) = f(n1 - 1, n2, u - n2) + f(n1, n2 - 1, u)
+    // (the largest observation belongs to one sample or the other), over all n1 + n2 choose n1
+    // equally likely rank assignments.
+    std::vector<std::vector<double>> f(n2 + 1);  // f[j][u] for the current i
+    for (size_t j = 0; j <= n2; ++j) f[j].assign(1, 1.0);  // i = 0: U = 0 in one way
+    for (size_t i = 1; i <= n1; ++i) {
+      std::vector<std::vector<double>> g(n2 + 1);
+      g[0].assign(1, 1.0);  // j = 0: U = 0 in one way
+      for (size_t j = 1; j <= n2; ++j) {
+        g[j].assign(i * j + 1, 0.0);
+        for (size_t k = 0; k < f[j].size(); ++k) g[j][k + j] += f[j][k];  // largest is in a: +j
+        for (size_t k = 0; k < g[j - 1].size(); ++k) g[j][k] += g[j - 1][k];
+      }
+      f = std::move(g);
+    }
+    const std::vector<double>& dist = f[n2];
+    double total = 0;
+    for (double c : dist) total += c;
+    const size_t uu = size_t(u);
+    double lo = 0, hi = 0;
+    for (size_t k = 0; k < dist.size(); ++k) {
+      if (k <= uu) lo += dist[k];
+      if (k >= uu) hi += dist[k];
+    }
+    return std::min(1.0, 2.0 * std::min(lo, hi) / total);
+  }
+  const double n = double(n1 + n2);
+  const double mu = double(cells) / 2.0;
+  const double var = double(cells) / 12.0 * ((n + 1.0) - tie_term / (n * (n - 1.0)));
+  if (!(var > 0)) return 1.0;  // every observation equal
+  const double z = std::max(0.0, std::fabs(u - mu) - 0.5) / std::sqrt(var);
+  return std::min(1.0, std::erfc(z / std::sqrt(2.0)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Matching and comparing cells
+
+namespace {
+
+// Columns that identify a cell when both files carry them (the run, table and trace CSVs).
+const char* const kIdColumns[] = {"scene", "workload", "scheme", "kernel", "params", "layout", "view",
+                                  "threads", "width", "height", "row", "table", "rays_file"};
+// Accuracy columns whose change is reported.
+const char* const kAccuracyColumns[] = {"mismatch_rate", "false_miss", "false_hit", "wrong_t", "ambiguous"};
+
+std::vector<double> parse_samples(const std::string& s) {
+  std::vector<double> out;
+  std::stringstream ss(s);
+  for (std::string item; std::getline(ss, item, ';');) {
+    if (item.empty()) continue;
+    try {
+      out.push_back(std::stod(item));
+    } catch (const std::exception&) {
+      throw InputError("mrays_samples: '" + item + "' is not a number");
+    }
+  }
+  return out;
+}
+
+double number(const CsvTable& t, size_t row, int col, const std::string& what) {
+  const std::string& s = t.at(row, col);
+  try {
+    size_t used = 0;
+    const double v = std::stod(s, &used);
+    if (used == s.size()) return v;
+  } catch (const std::exception&) {
+  }
+  throw InputError(what + ": row " + std::to_string(row + 2) + ": '" + s + "' is not a number");
+}
+
+struct Indexed {
+  std::vector<std::string> order;
+  std::map<std::string, size_t> row;
+  std::map<std::string, std::vector<std::pair<std::string, std::string>>> id;
+};
+
+Indexed index(const CsvTable& t, const std::vector<std::string>& ids) {
+  Indexed ix;
+  for (size_t r = 0; r < t.rows.size(); ++r) {
+    std::string key;
+    std::vector<std::pair<std::string, std::string>> id;
+    for (const auto& c : ids) {
+      const std::string& v = t.at(r, t.column(c));
+      id.emplace_back(c, v);
+      if (!v.empty()) key += (key.empty() ? "" : " / ") + (c == "scene" || c == "workload" || c == "scheme" ? v : c + "=" + v);
+    }
+    // The same cell twice in one file (e.g. concatenated runs): keep both, numbered.
+    for (int k = 2; ix.row.count(key); ++k) key = key.substr(0, key.rfind(" #")) + " #" + std::to_string(k);
+    ix.order.push_back(key);
+    ix.row[key] = r;
+    ix.id[key] = std::move(id);
+  }
+  return ix;
+}
+
+}  // namespace
+
+CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const CompareOptions& opt) {
+  for (const CsvTable* t : {&base, &next})
+    if (t->column("mrays_median") < 0) throw InputError("compare: a CSV has no mrays_median column (not a run CSV)");
+  std::vector<std::string> ids;
+  for (const char* c : kIdColumns)
+    if (base.column(c) >= 0 && next.column(c) >= 0) ids.push_back(c);
+  if (ids.empty()) throw InputError("compare: the CSVs share no identifying column (scene, workload, scheme, ...)");
+  const Indexed bi = index(base, ids), ni = index(next, ids);
+  CompareResult res;
+  double log_sum = 0;
+  for (const auto& key : bi.order) {
+    auto it = ni.row.find(key);
+    if (it == ni.row.end()) {
+      res.only_base.push_back(key);
+      continue;
+    }
+    const size_t br = bi.row.at(key), nr = it->second;
+    CellComparison c;
+    c.key = key;
+    c.id = bi.id.at(key);
+    c.base = number(base, br, base.column("mrays_median"), "base mrays_median");
+    c.next = number(next, nr, next.column("mrays_median"), "new mrays_median");
+    c.ratio = c.base > 0 ? c.next / c.base : 0;
+    const int bs = base.column("mrays_samples"), ns = next.column("mrays_samples");
+    if (bs >= 0 && ns >= 0) {
+      const auto a = parse_samples(base.at(br, bs)), b = parse_samples(next.at(nr, ns));
+      c.base_samples = a.size();
+      c.next_samples = b.size();
+      c.p = mann_whitney_p(b, a);
+    }
+    if (!c.p || c.base_samples < 2 || c.next_samples < 2) {
+      c.verdict = "n/a";
+      res.untested++;
+    } else if (*c.p < opt.alpha) {
+      c.verdict = c.ratio >= 1 ? "faster" : "slower";
+      (c.ratio >= 1 ? res.faster : res.slower)++;
+    } else {
+      c.verdict = "same";
+      res.same++;
+    }
+    for (const char* col : kAccuracyColumns) {
+      const int bc = base.column(col), nc = next.column(col);
+      if (bc < 0 && nc < 0) continue;
+      const double bv = bc >= 0 && !base.at(br, bc).empty() ? number(base, br, bc, col) : 0;
+      const double nv = nc >= 0 && !next.at(nr, nc).empty() ? number(next, nr, nc, col) : 0;
+      c.accuracy_delta.emplace_back(col, nv - bv);
+    }
+    if (opt.fail_on_regression_pct >= 0 && c.ratio < 1.0 - opt.fail_on_regression_pct / 100.0)
+      c.regression = c.verdict == "n/a" || c.verdict == "slower";
+    res.failed = res.failed || c.regression;
+    if (c.ratio > 0) log_sum += std::log(c.ratio);
+    res.cells.push_back(std::move(c));
+  }
+  for (const auto& key : ni.order)
+    if (!bi.row.count(key)) res.only_next.push_back(key);
+  res.geomean_ratio = res.cells.empty() ? 0 : std::exp(log_sum / double(res.cells.size()));
+  return res;
+}
+
+void print_comparison(const CompareResult& r, const CompareOptions& opt, FILE* out) {
+  size_t w = 4;
+  for (const auto& c : r.cells) w = std::max(w, c.key.size());
+  std::fprintf(out, "%-*s %10s %10s %7s %8s  %-7s %s\n", int(w), "cell", "base", "new", "ratio", "p", "verdict",
+               "accuracy change (new - base)");
+  for (const auto& c : r.cells) {
+    char p[16] = "-";
+    if (c.p) std::snprintf(p, sizeof p, "%.3g", *c.p);
+    std::string acc;
+    for (const auto& [col, d] : c.accuracy_delta)
+      if (d != 0) {
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "%s%s %+g", acc.empty() ? "" : ", ", col.c_str(), d);
+        acc += buf;
+      }
+    std::fprintf(out, "%-*s %10.4g %10.4g %6.3fx %8s  %-7s %s%s\n", int(w), c.key.c_str(), c.base, c.next, c.ratio, p,
+                 c.verdict.c_str(), acc.empty() ? "-" : acc.c_str(), c.regression ? "  REGRESSION" : "");
+  }
+  for (const auto& k : r.only_base) std::fprintf(out, "only in base: %s\n", k.c_str());
+  for (const auto& k : r.only_next) std::fprintf(out, "only in new:  %s\n", k.c_str());
+  std::fprintf(out,
+               "summary: %zu matched cells, geometric mean ratio %.3fx; %zu faster, %zu slower, %zu same "
+               "(Mann-Whitney U, two-sided, alpha %.2g), %zu without samples; %zu only in base, %zu only in new\n",
+               r.cells.size(), r.geomean_ratio, r.faster, r.slower, r.same, opt.alpha, r.untested, r.only_base.size(),
+               r.only_next.size());
+  if (opt.fail_on_regression_pct >= 0)
+    std::fprintf(out, "%s: %s regression beyond %.3g%%\n", r.failed ? "FAIL" : "ok", r.failed ? "a" : "no",
+                 opt.fail_on_regression_pct);
+}
+
+std::vector<Record> comparison_records(const CompareResult& r) {
+  std::vector<Record> out;
+  for (const auto& c : r.cells) {
+    Record rec;
+    for (const auto& [k, v] : c.id) rec.set(k, v);
+    rec.set("status", "matched").set("base_mrays", c.base).set("new_mrays", c.next).set("ratio", c.ratio);
+    rec.set("p_value", c.p ? std::to_string(*c.p) : std::string());
+    rec.set("base_samples", uint64_t(c.base_samples)).set("new_samples", uint64_t(c.next_samples));
+    rec.set("verdict", c.verdict).set("regression", c.regression ? 1 : 0);
+    for (const auto& [col, d] : c.accuracy_delta) rec.set("delta_" + col, d);
+    out.push_back(std::move(rec));
+  }
+  for (const auto* list : {&r.only_base, &r.only_next})
+    for (const auto& k : *list) {
+      Record rec;
+      rec.set("cell", k).set("status", list == &r.only_base ? "only_base" : "only_new");
+      out.push_back(std::move(rec));
+    }
+  return out;
+}
+
+}  // namespace tb
