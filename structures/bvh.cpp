@@ -42,23 +42,9 @@ inline float area(__m128 lo, __m128 hi) {
   return 2.f * (f[0] + f[1] + f[2]);
 }
 
-// One triangle as the builder sees it, a "primitive reference" (Wald 2007; Embree's PrimRef):
-// the triangle's box plus its id, so every pass streams one contiguous array, partitioned in
-// place, instead of gathering boxes and centroids through prim_index. 32 bytes. lo[3] carries the id's bits;
-// hi[3] = 1 so that lane 3 of lo + hi is a normal float (the id's bits are a denormal, which can
-// cost a microcode assist on every add).
-struct alignas(32) PrimRef {
-  float lo[4];
-  float hi[4];
-  __m128 vlo() const { return _mm_load_ps(lo); }
-  __m128 vhi() const { return _mm_load_ps(hi); }
-  uint32_t id() const {
-    uint32_t i;
-    std::memcpy(&i, &lo[3], 4);
-    return i;
-  }
-};
-static_assert(sizeof(PrimRef) == 32);
+// PrimRef (bvh.h) as SSE registers.
+inline __m128 vlo(const PrimRef& r) { return _mm_load_ps(r.lo); }
+inline __m128 vhi(const PrimRef& r) { return _mm_load_ps(r.hi); }
 
 // Centroid bounds travel with a task: the parent's partition pass computes them for free, so a
 // node never needs a bounds pass of its own. Centroids are kept doubled (lo + hi): the factor 2
@@ -150,8 +136,8 @@ struct Builder {
         if (a < 3) {
           best_axis = a;
           best_split = 1;
-          best_cost = area(refs[first].vlo(), refs[first].vhi()) * 1.f +
-                      area(refs[first + 1].vlo(), refs[first + 1].vhi()) * 1.f;
+          best_cost = area(vlo(refs[first]), vhi(refs[first])) * 1.f +
+                      area(vlo(refs[first + 1]), vhi(refs[first + 1])) * 1.f;
         }
       } else if (count <= kSparseMax && nbins <= 64) {
         // Small node: most bins stay empty, so rather than clearing and sweeping all 3 x nbins
@@ -162,7 +148,7 @@ struct Builder {
         uint64_t mask[3] = {0, 0, 0};
         alignas(16) int ks[kSparseMax][4];
         for (uint32_t i = 0; i < count; ++i) {
-          _mm_store_si128(reinterpret_cast<__m128i*>(ks[i]), bin_of(refs[first + i].vlo(), refs[first + i].vhi()));
+          _mm_store_si128(reinterpret_cast<__m128i*>(ks[i]), bin_of(vlo(refs[first + i]), vhi(refs[first + i])));
           for (int a = 0; a < 3; ++a) {
             const int j = a * nbins + ks[i][a];
             mask[a] |= uint64_t(1) << ks[i][a];
@@ -171,7 +157,7 @@ struct Builder {
           }
         }
         for (uint32_t i = 0; i < count; ++i) {
-          const __m128 lo = refs[first + i].vlo(), hi = refs[first + i].vhi();
+          const __m128 lo = vlo(refs[first + i]), hi = vhi(refs[first + i]);
           for (int a = 0; a < 3; ++a) {
             const int j = a * nbins + ks[i][a];
             bb[j].lo = grow_lo(bb[j].lo, lo); bb[j].hi = grow_hi(bb[j].hi, hi); bcnt[j]++;
@@ -183,7 +169,7 @@ struct Builder {
         std::fill(bs.box.begin(), bs.box.end(), BinBox{inf, ninf});
         std::fill(bs.count.begin(), bs.count.end(), 0u);
         for (uint32_t i = first; i < first + count; ++i) {
-          const __m128 lo = refs[i].vlo(), hi = refs[i].vhi();
+          const __m128 lo = vlo(refs[i]), hi = vhi(refs[i]);
           const __m128i k = bin_of(lo, hi);
           const int k0 = _mm_cvtsi128_si32(k), k1 = _mm_extract_epi32(k, 1) + nbins,
                     k2 = _mm_extract_epi32(k, 2) + 2 * nbins;
@@ -260,7 +246,7 @@ struct Builder {
         PrimRef* l = refs + first;
         for (PrimRef *it = l, *end = refs + first + count; it < end; ++it) {
           const bool left = is_left(*it);
-          const __m128 c = _mm_add_ps(it->vlo(), it->vhi());
+          const __m128 c = _mm_add_ps(vlo(*it), vhi(*it));
           const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(-int(left)));
           lcl = grow_lo(lcl, _mm_blendv_ps(inf, c, m)); lch = grow_hi(lch, _mm_blendv_ps(ninf, c, m));
           rcl = grow_lo(rcl, _mm_blendv_ps(c, inf, m)); rch = grow_hi(rch, _mm_blendv_ps(c, ninf, m));
@@ -271,14 +257,14 @@ struct Builder {
         }
         mid = uint32_t(l - refs);
         if (count == 2) {  // no bins were filled: the child boxes are the two references' boxes
-          lbl = refs[first].vlo(); lbh = refs[first].vhi();
-          rbl = refs[first + 1].vlo(); rbh = refs[first + 1].vhi();
+          lbl = vlo(refs[first]); lbh = vhi(refs[first]);
+          rbl = vlo(refs[first + 1]); rbh = vhi(refs[first + 1]);
         }
       } else {
         // All centroids coincide: split the list to respect max_leaf.
         mid = first + count / 2;
         for (uint32_t i = first; i < first + count; ++i) {
-          const __m128 lo = refs[i].vlo(), hi = refs[i].vhi(), c = _mm_add_ps(lo, hi);
+          const __m128 lo = vlo(refs[i]), hi = vhi(refs[i]), c = _mm_add_ps(lo, hi);
           if (i < mid) {
             lbl = grow_lo(lbl, lo); lbh = grow_hi(lbh, hi); lcl = grow_lo(lcl, c); lch = grow_hi(lch, c);
           } else {
@@ -304,34 +290,14 @@ struct Builder {
 
 }  // namespace
 
-BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
-  auto t0 = std::chrono::steady_clock::now();
-  const uint32_t n = uint32_t(scene.num_triangles());
+namespace {
+
+// The build proper, shared by both entry points: the references with their box (bl, bh) and
+// doubled-centroid bounds (cl, ch), gathered by the caller in its one pass over them.
+BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m128 ch, const BVHBuildParams& p,
+               std::chrono::steady_clock::time_point t0) {
   BVH bvh;
   bvh.prim_index.resize(n);
-  // Uninitialised: the loop below writes every reference once.
-  std::unique_ptr<PrimRef[]> refs(new PrimRef[n]);
-  // One pass: every triangle's box (as Scene::triangle_bounds, vertex order kept), the root box
-  // and the root's centroid bounds.
-  __m128 bl = _mm_set1_ps(INFINITY), bh = _mm_set1_ps(-INFINITY), cl = bl, ch = bh;
-  const Vec3* pos = scene.positions.data();
-  for (uint32_t i = 0; i < n; ++i) {
-    const auto& t = scene.triangles[i];
-    const Vec3 a = pos[t[0]], b = pos[t[1]], c = pos[t[2]];
-    const __m128 va = _mm_setr_ps(a.x, a.y, a.z, 0.f), vb = _mm_setr_ps(b.x, b.y, b.z, 0.f),
-                 vc = _mm_setr_ps(c.x, c.y, c.z, 0.f);
-    __m128 lo = grow_lo(grow_lo(_mm_set1_ps(INFINITY), va), vb);
-    lo = grow_lo(lo, vc);
-    __m128 hi = grow_hi(grow_hi(_mm_set1_ps(-INFINITY), va), vb);
-    hi = grow_hi(hi, vc);
-    lo = _mm_castsi128_ps(_mm_insert_epi32(_mm_castps_si128(lo), int(i), 3));
-    hi = _mm_insert_ps(hi, _mm_set_ss(1.f), 0x30);
-    _mm_store_ps(refs[i].lo, lo);
-    _mm_store_ps(refs[i].hi, hi);
-    const __m128 cen = _mm_add_ps(lo, hi);
-    bl = grow_lo(bl, lo); bh = grow_hi(bh, hi);
-    cl = grow_lo(cl, cen); ch = grow_hi(ch, cen);
-  }
   // A binary tree over n leaves has < 2n nodes. A single-threaded build only reserves them and
   // grows the array pair by pair: value-initialising all 2n nodes up front touched (page-faulted
   // and zeroed) twice the memory the tree uses, ~10% of the build time on Sponza. Parallel
@@ -350,7 +316,7 @@ BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
   bvh.nodes[0] = {{flo[0], flo[1], flo[2]}, 0, {fhi[0], fhi[1], fhi[2]}, n};
   bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
 
-  Builder b{p, bvh, refs.get()};
+  Builder b{p, bvh, refs};
   const BuildTask root{cl, ch, 0, 0};
   if (threads == 1) {
     b.grow_nodes = true;
@@ -379,6 +345,49 @@ BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
   bvh.stats.sah_cost = bvh.compute_sah_cost(p);
   bvh.stats.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return bvh;
+}
+
+}  // namespace
+
+BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const uint32_t n = uint32_t(scene.num_triangles());
+  // Uninitialised: the loop below writes every reference once.
+  std::unique_ptr<PrimRef[]> refs(new PrimRef[n]);
+  // One pass: every triangle's box (as Scene::triangle_bounds, vertex order kept), the root box
+  // and the root's centroid bounds.
+  __m128 bl = _mm_set1_ps(INFINITY), bh = _mm_set1_ps(-INFINITY), cl = bl, ch = bh;
+  const Vec3* pos = scene.positions.data();
+  for (uint32_t i = 0; i < n; ++i) {
+    const auto& t = scene.triangles[i];
+    const Vec3 a = pos[t[0]], b = pos[t[1]], c = pos[t[2]];
+    const __m128 va = _mm_setr_ps(a.x, a.y, a.z, 0.f), vb = _mm_setr_ps(b.x, b.y, b.z, 0.f),
+                 vc = _mm_setr_ps(c.x, c.y, c.z, 0.f);
+    __m128 lo = grow_lo(grow_lo(_mm_set1_ps(INFINITY), va), vb);
+    lo = grow_lo(lo, vc);
+    __m128 hi = grow_hi(grow_hi(_mm_set1_ps(-INFINITY), va), vb);
+    hi = grow_hi(hi, vc);
+    lo = _mm_castsi128_ps(_mm_insert_epi32(_mm_castps_si128(lo), int(i), 3));
+    hi = _mm_insert_ps(hi, _mm_set_ss(1.f), 0x30);
+    _mm_store_ps(refs[i].lo, lo);
+    _mm_store_ps(refs[i].hi, hi);
+    const __m128 cen = _mm_add_ps(lo, hi);
+    bl = grow_lo(bl, lo); bh = grow_hi(bh, hi);
+    cl = grow_lo(cl, cen); ch = grow_hi(ch, cen);
+  }
+  return build_refs(refs.get(), n, bl, bh, cl, ch, p, t0);
+}
+
+BVH BVH::build(std::span<PrimRef> refs, const BVHBuildParams& p) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const uint32_t n = uint32_t(refs.size());
+  __m128 bl = _mm_set1_ps(INFINITY), bh = _mm_set1_ps(-INFINITY), cl = bl, ch = bh;
+  for (const PrimRef& r : refs) {
+    const __m128 lo = vlo(r), hi = vhi(r), cen = _mm_add_ps(lo, hi);
+    bl = grow_lo(bl, lo); bh = grow_hi(bh, hi);
+    cl = grow_lo(cl, cen); ch = grow_hi(ch, cen);
+  }
+  return build_refs(refs.data(), n, bl, bh, cl, ch, p, t0);
 }
 
 void BVH::refit(const Scene& scene, int threads) {

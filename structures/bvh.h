@@ -1,7 +1,17 @@
 // Binary BVH with a binned SAH builder (Wald 2007, "On fast construction of SAH-based bounding
 // volume hierarchies"), 32-byte nodes, sibling pairs adjacent and 64-byte aligned.
+//
+// The project's one binary builder. It works on a span of primitive references (a box and an id
+// each, PrimRef below) and never looks at triangles: BVH::build(scene) makes one reference per
+// scene triangle and calls the same code, and a structure that needs a tree over something else
+// hands its own references in. The RayGrid octree (structures/octree.h, thesis §5.3.2) does so
+// for its mini-BVHs: an index subset of the scene (the triangles a leaf references), each box
+// clipped to the leaf (structures/clip.h). Wide layouts come from the one collapse of such a tree
+// (MBVH::collapse, structures/mbvh.h).
 #pragma once
 #include <cstdint>
+#include <cstring>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -36,12 +46,40 @@ struct BVHStats {
   std::string describe() const;
 };
 
+// One primitive as the builder sees it, a "primitive reference" (Wald 2007; Embree's PrimRef):
+// its box and its id, so every pass of the builder streams one contiguous array, partitioned in
+// place, instead of gathering boxes and centroids through an index. The centroid is the box's
+// (lo + hi) / 2. 32 bytes, SSE-loadable: lo[3] carries the id's bits; hi[3] = 1 so that lane 3
+// of lo + hi is a normal float (the id's bits are a denormal, which can cost a microcode assist
+// on every add).
+struct alignas(32) PrimRef {
+  float lo[4];
+  float hi[4];
+  PrimRef() = default;  // uninitialised, like the arrays of them the builder fills
+  PrimRef(const AABB& box, uint32_t id)
+      : lo{box.lo.x, box.lo.y, box.lo.z, 0.f}, hi{box.hi.x, box.hi.y, box.hi.z, 1.f} {
+    std::memcpy(&lo[3], &id, 4);
+  }
+  uint32_t id() const {
+    uint32_t i;
+    std::memcpy(&i, &lo[3], 4);
+    return i;
+  }
+  AABB box() const { return {{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}}; }
+};
+static_assert(sizeof(PrimRef) == 32);
+
 struct BVH {
   aligned_vector<BVHNode> nodes;    // nodes[0] = root; nodes[1] unused so sibling pairs share a line
-  std::vector<uint32_t> prim_index; // leaf prim slot -> scene triangle
+  std::vector<uint32_t> prim_index; // leaf prim slot -> primitive id (scene triangle)
   BVHStats stats;
 
+  // Over every scene triangle (its box as Scene::triangle_bounds; id = triangle index).
   static BVH build(const Scene& scene, const BVHBuildParams& params = {});
+  // Over the references `refs` (any boxes, any ids: a subset of the scene, clipped boxes),
+  // which the build reorders in place. Same builder, same tree as the scene build for the same
+  // references; prim_index holds the ids.
+  static BVH build(std::span<PrimRef> refs, const BVHBuildParams& params = {});
   // Recomputes every box bottom-up for moved vertices, keeping the topology (thesis Table 1).
   void refit(const Scene& scene, int threads = 1);
   double compute_sah_cost(const BVHBuildParams& params) const;

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdio>
 
+#include "structures/clip.h"
+
 namespace tb {
 
 std::string KDBuildParams::key() const {
@@ -54,117 +56,6 @@ std::string KDStats::describe() const {
                 nodes, leaves, empty_leaves, (unsigned long long)references, refs_per_triangle, max_leaf_size,
                 max_depth, depth_limit, clipped, sah_cost, build_ms, bytes);
   return buf;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Clipping (perfect splits, Wald & Havran 2006 §4.3; Havran's thesis "split clipping").
-// ---------------------------------------------------------------------------------------------
-namespace {
-
-struct ClipVert {
-  double p[3];
-  uint8_t exact;  // bit a: p[a] is exactly a float input (a vertex coordinate or a box plane)
-};
-
-// Sutherland-Hodgman against the six planes of the closed box; inside tests are inclusive, so a
-// triangle lying in a face of the box survives whole. Returns the vertex count (0: no overlap).
-int clip_polygon(Vec3 a, Vec3 b, Vec3 c, const AABB& box, ClipVert* out /* >= 9 */) {
-  ClipVert buf[2][10];
-  const Vec3 v[3] = {a, b, c};
-  for (int i = 0; i < 3; ++i) buf[0][i] = {{v[i].x, v[i].y, v[i].z}, 7};
-  int n = 3, cur = 0;
-  for (int axis = 0; axis < 3 && n > 0; ++axis) {
-    for (int side = 0; side < 2 && n > 0; ++side) {
-      const double w = side == 0 ? double(box.lo[axis]) : double(box.hi[axis]);
-      const ClipVert* in = buf[cur];
-      ClipVert* o = buf[cur ^ 1];
-      int m = 0;
-      auto inside = [&](const ClipVert& q) { return side == 0 ? q.p[axis] >= w : q.p[axis] <= w; };
-      for (int i = 0; i < n; ++i) {
-        const ClipVert& s = in[i];
-        const ClipVert& e = in[(i + 1) % n];
-        const bool si = inside(s), ei = inside(e);
-        if (si) o[m++] = s;
-        if (si != ei) {
-          // The edge crosses the plane strictly (an endpoint on the plane counts as inside).
-          const double t = (w - s.p[axis]) / (e.p[axis] - s.p[axis]);
-          ClipVert x;
-          x.exact = 0;
-          for (int k = 0; k < 3; ++k) {
-            if (s.p[k] == e.p[k]) {
-              x.p[k] = s.p[k];
-              x.exact |= uint8_t(s.exact & e.exact & (1u << k));
-            } else {
-              x.p[k] = s.p[k] + t * (e.p[k] - s.p[k]);
-            }
-          }
-          x.p[axis] = w;
-          x.exact |= uint8_t(1u << axis);
-          o[m++] = x;
-        }
-      }
-      n = m;
-      cur ^= 1;
-    }
-  }
-  for (int i = 0; i < n; ++i) out[i] = buf[cur][i];
-  return n;
-}
-
-float round_down(double x) {
-  float f = float(x);
-  if (double(f) > x) f = std::nextafter(f, -INFINITY);
-  return f;
-}
-float round_up(double x) {
-  float f = float(x);
-  if (double(f) < x) f = std::nextafter(f, INFINITY);
-  return f;
-}
-
-}  // namespace
-
-AABB clip_triangle_bounds(Vec3 a, Vec3 b, Vec3 c, const AABB& box) {
-  ClipVert poly[10];
-  const int n = clip_polygon(a, b, c, box, poly);
-  AABB out;
-  if (n == 0) return out;
-  for (int k = 0; k < 3; ++k) {
-    // Interpolated coordinates carry a double rounding error of a few ulps of the largest
-    // magnitude involved; widen by far more than that, then round outward to float.
-    const double scale = std::max({std::fabs(double(a[k])), std::fabs(double(b[k])), std::fabs(double(c[k])),
-                                   std::fabs(double(box.lo[k])), std::fabs(double(box.hi[k]))});
-    const double margin = scale * 1e-13;
-    float lo = INFINITY, hi = -INFINITY;
-    for (int i = 0; i < n; ++i) {
-      const double x = poly[i].p[k];
-      const bool exact = poly[i].exact & (1u << k);
-      lo = std::min(lo, exact ? float(x) : round_down(x - margin));
-      hi = std::max(hi, exact ? float(x) : round_up(x + margin));
-    }
-    // Never beyond the box (the cell) or the triangle's own bounds.
-    lo = std::max(lo, std::max(box.lo[k], std::min({a[k], b[k], c[k]})));
-    hi = std::min(hi, std::min(box.hi[k], std::max({a[k], b[k], c[k]})));
-    out.lo[k] = lo;
-    out.hi[k] = hi;
-  }
-  return out;
-}
-
-double clipped_triangle_area(Vec3 a, Vec3 b, Vec3 c, const AABB& box) {
-  ClipVert poly[10];
-  const int n = clip_polygon(a, b, c, box, poly);
-  if (n < 3) return 0.0;
-  // Newell's vector area of the planar polygon.
-  double nx = 0, ny = 0, nz = 0;
-  for (int i = 0; i < n; ++i) {
-    const double* p = poly[i].p;
-    const double* q = poly[(i + 1) % n].p;
-    nx += (p[1] - q[1]) * (p[2] + q[2]);
-    ny += (p[2] - q[2]) * (p[0] + q[0]);
-    nz += (p[0] - q[0]) * (p[1] + q[1]);
-  }
-  return 0.5 * std::sqrt(nx * nx + ny * ny + nz * nz);
 }
 
 // ---------------------------------------------------------------------------------------------

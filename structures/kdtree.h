@@ -2,7 +2,7 @@
 // empty-space bonus of Hurley et al.), built in O(N log N) with the event-sorting method of
 // Wald & Havran 2006 ("On building fast kd-trees for ray tracing, and on doing that in
 // O(N log N)"), with perfect splits: a triangle that straddles a split plane is clipped to each
-// child cell (Sutherland-Hodgman) and classified further down by the bounds of the clipped
+// child cell (structures/clip.h) and classified further down by the bounds of the clipped
 // polygon, so it is only referenced by cells it really overlaps.
 //
 // Watertightness contract with the traversal (traversal/kd_single.cpp, kd_packet.cpp): every
@@ -116,13 +116,6 @@ struct KDTree {
   template <class F>
   void for_each_node(F&& f) const;
 };
-
-// Clips triangle (a, b, c) to the closed box `box` (Sutherland-Hodgman, in double) and returns
-// the bounds of the clipped polygon rounded outward to float where they are not exact; an empty
-// box when the triangle does not touch the box. Shared by the builder and its tests.
-AABB clip_triangle_bounds(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
-// Area of the triangle clipped to the closed box, in double (for tests and statistics).
-double clipped_triangle_area(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
 
 // ---- What both kD traversals share (thesis Alg. 2.2/2.3, made robust) ----------------------
 // Every split distance d = (split - org) / dir is rounded a few ulps (one rounding each for the

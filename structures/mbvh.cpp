@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
 
 namespace tb {
 
@@ -41,6 +42,8 @@ class Collapser {
     range();
     if (p.sah_collapse) optimise();
   }
+
+  double leaf_depth_sum() const { return leaf_depth_sum_; }
 
   void run() {
     const uint32_t tris = uint32_t(bvh_.prim_index.size());
@@ -187,7 +190,10 @@ class Collapser {
     // Leaves first (they need no recursion), then the interior children in depth-first order,
     // so a node's first interior child sits right after it in memory.
     for (size_t i = 0; i < kids.size(); ++i)
-      if (as_leaf(kids[i])) node.ref[i] = make_leaf(first_[kids[i]], count_[kids[i]]);
+      if (as_leaf(kids[i])) {
+        node.ref[i] = make_leaf(first_[kids[i]], count_[kids[i]]);
+        leaf_depth_sum_ += depth;
+      }
     std::vector<std::pair<size_t, uint32_t>> interior;
     for (size_t i = 0; i < kids.size(); ++i)
       if (!as_leaf(kids[i])) {
@@ -239,7 +245,25 @@ class Collapser {
   std::vector<std::array<double, N + 1>> F_;
   std::vector<std::array<uint8_t, N + 1>> split_;
   std::vector<uint8_t> leaf_, node_split_;
+  double leaf_depth_sum_ = 0;
 };
+
+// The statistics that follow from the arrays alone (collapse and concat).
+template <int N, int W>
+void count_arrays(MBVH<N, W>& m) {
+  MBVHStats& s = m.stats;
+  s.width = N, s.tri_width = W;
+  s.nodes = uint32_t(m.nodes.size());
+  s.blocks = uint32_t(m.blocks.size() + m.small.size());
+  s.node_bytes = m.nodes.size() * sizeof(MBVHNode<N>);
+  s.tri_bytes = m.blocks.size() * sizeof(TriBlock<W>) + m.small.size() * sizeof(TriBlock<4>);
+  uint64_t children = 0;
+  for (const MBVHNode<N>& n : m.nodes) children += n.num_children;
+  s.avg_children = s.nodes ? double(children) / s.nodes : 0.0;
+  s.avg_leaf_tris = s.leaves ? double(s.triangles) / s.leaves : 0.0;
+  const double lanes = double(m.blocks.size()) * W + double(m.small.size()) * 4;
+  s.lane_fill = lanes > 0 ? double(s.triangles) / lanes : 0.0;
+}
 
 }  // namespace
 
@@ -247,16 +271,13 @@ template <int N, int W>
 MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBuildParams& params) {
   const auto t0 = std::chrono::steady_clock::now();
   MBVH m;
-  Collapser<N, W>(scene, bvh, params, m).run();
+  Collapser<N, W> c(scene, bvh, params, m);
+  c.run();
   MBVHStats& s = m.stats;
-  s.width = N, s.tri_width = W;
-  s.nodes = uint32_t(m.nodes.size());
-  s.blocks = uint32_t(m.blocks.size() + m.small.size());
   s.triangles = uint32_t(bvh.prim_index.size());
-  s.node_bytes = m.nodes.size() * sizeof(Node);
-  s.tri_bytes = m.blocks.size() * sizeof(Block) + m.small.size() * sizeof(TriBlock<4>);
   s.bvh_build_ms = bvh.stats.build_ms;
-  uint64_t children = 0;
+  s.avg_leaf_depth = s.leaves ? c.leaf_depth_sum() / s.leaves : 0.0;
+  count_arrays(m);
   double cost = 0;
   AABB root;
   for (const Node& n : m.nodes)
@@ -264,7 +285,6 @@ MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBu
   const double root_area = std::max(1e-30f, root.area());
   // SAH cost with the thesis' unit costs: one per node visit, one per SIMD block test.
   for (const Node& n : m.nodes) {
-    children += n.num_children;
     for (uint32_t i = 0; i < n.num_children; ++i) {
       const double a = n.child_box(int(i)).area() / root_area;
       const uint32_t nt = mbvh_ref::num_tris(n.ref[i]);
@@ -272,11 +292,51 @@ MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBu
     }
   }
   s.sah_cost = cost + (m.nodes[0].num_children ? 1.0 : 0.0);
-  s.avg_children = s.nodes ? double(children) / s.nodes : 0.0;
-  s.avg_leaf_tris = s.leaves ? double(s.triangles) / s.leaves : 0.0;
-  const double lanes = double(m.blocks.size()) * W + double(m.small.size()) * 4;
-  s.lane_fill = lanes > 0 ? double(s.triangles) / lanes : 0.0;
   s.collapse_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return m;
+}
+
+template <int N, int W>
+MBVH<N, W> MBVH<N, W>::concat(std::vector<MBVH>&& parts, std::vector<Placement>* where) {
+  MBVH m;
+  size_t nodes = 0, blocks = 0, small = 0;
+  for (const MBVH& p : parts) {
+    nodes += p.nodes.size(), blocks += p.blocks.size(), small += p.small.size();
+    if (!p.nodes.empty()) m.small_leaf = p.small_leaf;
+  }
+  if (blocks > mbvh_ref::kMaxBlocks || small > mbvh_ref::kMaxBlocks)
+    throw std::runtime_error("mbvh: too many triangle blocks");
+  m.nodes.reserve(nodes);
+  m.blocks.reserve(blocks);
+  m.small.reserve(small);
+  if (where) where->assign(parts.size(), {});
+  double leaf_depth_sum = 0;
+  for (size_t k = 0; k < parts.size(); ++k) {
+    MBVH& p = parts[k];
+    const uint32_t nb = uint32_t(m.nodes.size()), bb = uint32_t(m.blocks.size()), sb = uint32_t(m.small.size());
+    if (where) (*where)[k] = {nb, bb, sb};
+    if (p.nodes.empty()) continue;
+    if (p.small_leaf != m.small_leaf) throw std::logic_error("mbvh: concat of parts with different small leaves");
+    for (Node n : p.nodes) {
+      for (uint32_t i = 0; i < n.num_children; ++i) {
+        const uint32_t r = n.ref[i], nt = mbvh_ref::num_tris(r);
+        n.ref[i] = !mbvh_ref::is_leaf(r) ? r + nb
+                                         : mbvh_ref::make_leaf(mbvh_ref::first_block(r) + (nt <= m.small_leaf ? sb : bb), nt);
+      }
+      m.nodes.push_back(n);
+    }
+    m.blocks.insert(m.blocks.end(), p.blocks.begin(), p.blocks.end());
+    m.small.insert(m.small.end(), p.small.begin(), p.small.end());
+    m.stats.leaves += p.stats.leaves;
+    m.stats.triangles += p.stats.triangles;
+    m.stats.max_depth = std::max(m.stats.max_depth, p.stats.max_depth);
+    m.stats.bvh_build_ms += p.stats.bvh_build_ms;
+    m.stats.collapse_ms += p.stats.collapse_ms;
+    leaf_depth_sum += p.stats.avg_leaf_depth * p.stats.leaves;
+    p = MBVH{};  // frees the part as soon as it is copied
+  }
+  m.stats.avg_leaf_depth = m.stats.leaves ? leaf_depth_sum / m.stats.leaves : 0.0;
+  count_arrays(m);
   return m;
 }
 

@@ -95,6 +95,7 @@ struct MBVHStats {
   uint32_t nodes = 0, leaves = 0, blocks = 0, triangles = 0, max_depth = 0;
   double avg_children = 0, avg_leaf_tris = 0, lane_fill = 0;  // lane_fill: real triangles / block lanes
   double sah_cost = 0, bvh_build_ms = 0, collapse_ms = 0;
+  double avg_leaf_depth = 0;  // mean depth of the leaves (children of the root: 1)
   size_t node_bytes = 0, tri_bytes = 0;
   std::string describe() const;
 };
@@ -116,7 +117,20 @@ struct MBVH {
   // (Dammertz et al. 2008, the thesis' construction): start from the binary node's two children
   // and repeatedly open the interior child with the largest surface area until there are N.
   // SAH (params.sah_collapse): the dynamic programme described at MBVHBuildParams.
+  // The binary tree may be over any primitive references (BVH::build over a span): the blocks
+  // take prim_index's ids as scene triangles.
   static MBVH collapse(const Scene& scene, const BVH& bvh, const MBVHBuildParams& params);
+  // Where concat put one part: its root node and its first block (in `blocks`, or in `small`
+  // for a part whose blocks are all small).
+  struct Placement {
+    uint32_t root = 0, first_block = 0, first_small = 0;
+  };
+  // Several wide trees collapsed on their own (in parallel, say) in one pair of arrays, part
+  // after part, each part's nodes and blocks contiguous and in their own order, child references
+  // rebased (RayGrid's per-leaf mini-MBVHs, structures/octree.h). The parts are consumed; `where`
+  // receives each one's placement. Stats: sums and means over the parts (sah_cost 0: the parts
+  // have different roots); a part with no nodes takes no space.
+  static MBVH concat(std::vector<MBVH>&& parts, std::vector<Placement>* where = nullptr);
   // Scene triangle of every block lane (block * W + lane, then the small blocks' lanes): the
   // order of the TriangleSet the scalar kernels (--kernel moller/plane/plane_rcp) index.
   std::vector<uint32_t> lane_prims() const;

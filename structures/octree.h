@@ -17,15 +17,22 @@
 // leaving a leaf through a face goes to that node and, if it is interior, descends to the leaf
 // that contains its exit point (Octree::locate).
 //
-// Mini-MBVHs (§5.3.2 "MBVH"): per leaf a binary binned-SAH BVH, collapsed to 4 wide (Dammertz et
-// al. 2008; the SAH-aware collapse of Wald et al. 2008 as in structures/mbvh.cpp), in the layout
-// of structures/mbvh.h (MBVHNode<4>, 128 bytes; TriBlock<4> leaves) so the SIMD node and
-// triangle tests and the single-ray traversal of mbvh.h apply unchanged. The binary build works
-// on an index subset of the scene with each triangle's box clipped to the (padded) leaf: a large
-// triangle that crosses many leaves only costs box area where it actually is, and the leaf's
-// geometry bounds (OctreeLeaf::cull) let a ray skip a leaf whose geometry it cannot reach.
-// All mini-MBVHs share one node array and one block array (MBVH<4,4>), leaf after leaf, so a
-// leaf's nodes and triangles are contiguous in memory (spatial coherence = memory coherence).
+// Which leaves reference a triangle, and the part of it a leaf sees, come from the project's one
+// triangle/box clipper (structures/clip.h, shared with the kD-tree's perfect splits): a triangle
+// whose box crosses a padded leaf box is referenced when its clipped polygon is not empty.
+//
+// Mini-MBVHs (§5.3.2 "MBVH"): per leaf a wide BVH in the layout of structures/mbvh.h (MBVHNode<4>
+// or <8>; TriBlock<4> leaves), so the SIMD node and triangle tests of the MBVH schemes apply
+// unchanged. Built by the project's one builder path, as the whole-scene MBVHs are: the binary
+// binned-SAH BVH over a span of references (BVH::build, structures/bvh.h) — an index subset of the
+// scene, each triangle's box clipped to the padded leaf, so a large triangle that crosses many
+// leaves only costs box area where it actually is, and the root box is the leaf's geometry bounds
+// (OctreeLeaf::cull) that let a ray skip a leaf whose geometry it cannot reach — then the one
+// collapse (MBVH::collapse: greedy to 4 wide as Dammertz et al. 2008 and the thesis, or the
+// SAH-optimal programme of Ylitie et al. 2017 to 8 wide). The leaves build in parallel, each into
+// arrays of its own; MBVH::concat lays them out in one node array and one block array, leaf after
+// leaf, so a leaf's nodes and triangles are contiguous in memory (spatial coherence = memory
+// coherence).
 #pragma once
 #include <immintrin.h>
 
@@ -135,10 +142,5 @@ struct Octree {
   // Scene triangles referenced by a leaf (each once), for tests and statistics.
   std::vector<uint32_t> leaf_triangles(uint32_t leaf) const;
 };
-
-// Closed triangle / closed box overlap, decided by clipping the triangle to the box in double
-// precision (Sutherland-Hodgman). On overlap, `bounds` (if given) receives the bounds of the
-// clipped polygon rounded outward to float and limited to the box.
-bool clip_triangle_to_box(Vec3 a, Vec3 b, Vec3 c, const AABB& box, AABB* bounds = nullptr);
 
 }  // namespace tb

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 
+#include "structures/clip.h"
 #include "structures/kdtree.h"
 #include "test_util.h"
 #include "workloads/hard_cases.h"

@@ -1,0 +1,24 @@
+// Triangle / axis-aligned box clipping, the one clipper of the project: the kD-tree's perfect
+// splits (Wald & Havran 2006 §4.3; Havran's thesis "split clipping") and the RayGrid octree
+// (thesis §5.3.2: which leaves reference a triangle, and the clipped boxes its mini-BVHs are
+// built over) both call it.
+//
+// Robustness: Sutherland-Hodgman against the closed box in double, inclusive inside tests (a
+// triangle lying in a face, or touching the box only along an edge or at a vertex, overlaps it);
+// every coordinate that is exactly a float input (a vertex coordinate, a box plane, a coordinate
+// kept by an axis-parallel edge) stays exact, every interpolated one is widened by far more than
+// its double rounding error and rounded outward to float. The bounds can therefore only grow
+// beyond the exact clipped polygon's, never shrink, and never reach beyond the box or the
+// triangle's own bounds.
+#pragma once
+#include "structures/vec3.h"
+
+namespace tb {
+
+// Bounds of triangle (a, b, c) clipped to the closed box `box`, as above; an empty box
+// (AABB::empty) when the triangle does not touch the box.
+AABB clip_triangle_bounds(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
+// Area of the triangle clipped to the closed box, in double (for tests and statistics).
+double clipped_triangle_area(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
+
+}  // namespace tb
