@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "structures/clip.h"
+
 
 namespace tb {
 namespace {
@@ -29,51 +31,6 @@ AABB intersect(const AABB& a, const AABB& b) {
   r.lo = vmax(a.lo, b.lo);
   r.hi = vmin(a.hi, b.hi);
   return r;
-}
-
-// One float step down/up for finite values (std::nextafter is a libm call; this is the hot loop).
-inline float step_down(float f) {
-  if (f == 0.f) return -std::numeric_limits<float>::denorm_min();
-  uint32_t u = std::bit_cast<uint32_t>(f);
-  return std::bit_cast<float>(f > 0.f ? u - 1 : u + 1);
-}
-inline float step_up(float f) { return -step_down(-f); }
-inline float round_down(double x) {
-  const float f = float(x);
-  return double(f) > x ? step_down(f) : f;
-}
-inline float round_up(double x) {
-  const float f = float(x);
-  return double(f) < x ? step_up(f) : f;
-}
-
-// Bounds of triangle v's parts on either side of the plane x[axis] = pos: its vertices on each
-// side plus the points where its edges cross the plane. A crossing is computed in double and
-// widened by far more than its rounding error before rounding outward to float (the rule of the
-// kD-tree's clipper, clip_triangle_bounds), so each box contains its part exactly.
-inline void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AABB& right) {
-  left = right = AABB{};
-  for (int i = 0; i < 3; ++i) {
-    const Vec3 &p = v[i], &q = v[(i + 1) % 3];
-    if (p[axis] <= pos) left.grow(p);
-    if (p[axis] >= pos) right.grow(p);
-    if ((p[axis] < pos && q[axis] > pos) || (p[axis] > pos && q[axis] < pos)) {
-      const double t = (double(pos) - p[axis]) / (double(q[axis]) - p[axis]);
-      AABB x;
-      for (int k = 0; k < 3; ++k) {
-        if (k == axis) {
-          x.lo[k] = x.hi[k] = pos;
-          continue;
-        }
-        const double c = double(p[k]) + t * (double(q[k]) - p[k]);
-        const double margin = std::max(std::fabs(double(p[k])), std::fabs(double(q[k]))) * 1e-13;
-        x.lo[k] = std::max(round_down(c - margin), std::min(p[k], q[k]));
-        x.hi[k] = std::min(round_up(c + margin), std::max(p[k], q[k]));
-      }
-      left.grow(x);
-      right.grow(x);
-    }
-  }
 }
 
 struct Task {
@@ -104,6 +61,10 @@ class SpatialBuilder {
       stack.pop_back();
       bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth);
       const AABB box{bvh.nodes[t.node].lo, bvh.nodes[t.node].hi};
+      if (t.refs.size() < size_t(std::max(sp_.min_refs, 2)) && !has_large_ref(t.refs, box)) {
+        graft(bvh, t);
+        continue;
+      }
       std::vector<SpatialRef> left, right;
       if (!split(t.refs, box, left, right)) {
         BVHNode& n = bvh.nodes[t.node];
@@ -129,6 +90,41 @@ class SpatialBuilder {
   }
 
  private:
+  // Below min_refs references spatial splits gain little (Stich et al. §5: most of the SAH gain
+  // is near the top), so the subtree comes from the project's fast binned builder over the same
+  // references (BVH::build over a span), renumbered into this tree.
+  void graft(BVH& bvh, Task& t) {
+    std::vector<PrimRef> refs;
+    refs.reserve(t.refs.size());
+    for (const auto& r : t.refs) refs.emplace_back(r.box, r.prim);
+    BVHBuildParams p = p_;
+    p.threads = 1;
+    const BVH sub = BVH::build(std::span<PrimRef>(refs), p);
+    const uint32_t node_off = uint32_t(bvh.nodes.size()) - 2, prim_off = uint32_t(bvh.prim_index.size());
+    auto renumber = [&](BVHNode n) {
+      n.left_first += n.is_leaf() ? prim_off : node_off;
+      return n;
+    };
+    const BVHNode root = renumber(sub.nodes[0]);
+    bvh.nodes[t.node].left_first = root.left_first;
+    bvh.nodes[t.node].count = root.count;
+    for (size_t i = 2; i < sub.nodes.size(); ++i) bvh.nodes.push_back(renumber(sub.nodes[i]));
+    bvh.prim_index.insert(bvh.prim_index.end(), sub.prim_index.begin(), sub.prim_index.end());
+    bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth + sub.stats.max_depth);
+  }
+
+  // A reference longer than half the node on some axis: where big triangles meet small ones (a
+  // ground quad isolated with a few walls by the object splits above) spatial splits keep paying
+  // far below min_refs, so such subtrees are not handed off.
+  static bool has_large_ref(const std::vector<SpatialRef>& refs, const AABB& box) {
+    const Vec3 half = box.extent() * 0.5f;
+    for (const auto& r : refs) {
+      const Vec3 e = r.box.extent();
+      if (e.x > half.x || e.y > half.y || e.z > half.z) return true;
+    }
+    return false;
+  }
+
   // Splits refs into left/right, or returns false for a leaf.
   bool split(std::vector<SpatialRef>& refs, const AABB& box, std::vector<SpatialRef>& left,
              std::vector<SpatialRef>& right) {
@@ -137,7 +133,7 @@ class SpatialBuilder {
     Split best = object_split(refs);
     // Spatial splits only where the object split's children overlap noticeably (Stich §4.3) and
     // the duplication budget is not spent.
-    if (used_ < budget_ && count >= uint32_t(sp_.min_refs) && (best.kind == Split::none ||
+    if (used_ < budget_ && (best.kind == Split::none ||
                             intersect(best.left, best.right).area() > sp_.alpha * root_area_)) {
       const Split s = spatial_split(refs, box);
       if (s.cost < best.cost) best = s;
@@ -275,6 +271,18 @@ class SpatialBuilder {
         bins[b1].exits++;
         if (b0 == b1) {
           bins[b0].box.grow(r.box);
+          continue;
+        }
+        if (b1 - b0 + 1 > sp_.chop_max) {
+          // Many bins: the reference's box cut to each bin's slab, a superset of the exact part
+          // (the same for the axis-aligned floors and walls that span most bins) at no clipping
+          // cost; the split itself, if chosen, clips exactly (do_spatial).
+          for (int b = b0; b <= b1; ++b) {
+            AABB part = r.box;
+            part.lo[a] = std::max(part.lo[a], plane(box, a, b));
+            part.hi[a] = std::min(part.hi[a], plane(box, a, b + 1));
+            bins[b].box.grow(part);
+          }
           continue;
         }
         // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the

@@ -34,7 +34,13 @@ struct SpatialSplitParams {
   // way); once spent, only object splits are made.
   float budget = 1.0f;
   int spatial_bins = 16;  // spatial bins per axis (object splits use BVHBuildParams::bins)
-  int min_refs = 0;       // nodes with fewer references make object splits only
+  // Subtrees of fewer references are built by the plain binned builder (BVH::build over their
+  // references): spatial splits deep in the tree gain little SAH (sponza: 0.823 of the plain
+  // SAH with 16, 0.825 with 64, 0.833 with 256) and cost the most build time.
+  int min_refs = 64;
+  // A reference spanning more spatial bins than this is binned as its box cut to each bin's slab
+  // instead of being clipped at every plane (same SAH within 1% on sponza, 2-3x faster binning).
+  int chop_max = 1000;
 };
 
 // One reference: a (possibly clipped) box around part of triangle `prim`.

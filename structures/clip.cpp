@@ -1,6 +1,8 @@
 #include "structures/clip.h"
 
 #include <algorithm>
+#include <bit>
+#include <limits>
 #include <cmath>
 #include <cstdint>
 
@@ -65,15 +67,21 @@ int clip_polygon(Vec3 a, Vec3 b, Vec3 c, const AABB& box, ClipVert* out /* kMaxC
   return n;
 }
 
-float round_down(double x) {
-  float f = float(x);
-  if (double(f) > x) f = std::nextafter(f, -INFINITY);
-  return f;
+// One float step down/up for finite values (std::nextafter is a libm call, and the spatial-split
+// builder calls these millions of times).
+inline float step_down(float f) {
+  if (f == 0.f) return -std::numeric_limits<float>::denorm_min();
+  const uint32_t u = std::bit_cast<uint32_t>(f);
+  return std::bit_cast<float>(f > 0.f ? u - 1 : u + 1);
 }
-float round_up(double x) {
-  float f = float(x);
-  if (double(f) < x) f = std::nextafter(f, INFINITY);
-  return f;
+inline float step_up(float f) { return -step_down(-f); }
+inline float round_down(double x) {
+  const float f = float(x);
+  return double(f) > x ? step_down(f) : f;
+}
+inline float round_up(double x) {
+  const float f = float(x);
+  return double(f) < x ? step_up(f) : f;
 }
 
 }  // namespace
@@ -119,6 +127,33 @@ double clipped_triangle_area(Vec3 a, Vec3 b, Vec3 c, const AABB& box) {
     nz += (p[0] - q[0]) * (p[1] + q[1]);
   }
   return 0.5 * std::sqrt(nx * nx + ny * ny + nz * nz);
+}
+
+void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AABB& right) {
+  left = right = AABB{};
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 &p = v[i], &q = v[(i + 1) % 3];
+    if (p[axis] <= pos) left.grow(p);
+    if (p[axis] >= pos) right.grow(p);
+    if ((p[axis] < pos && q[axis] > pos) || (p[axis] > pos && q[axis] < pos)) {
+      // The crossing in double, widened by far more than its rounding error, rounded outward
+      // (the rule of clip_triangle_bounds), clamped to the edge's own bounds.
+      const double t = (double(pos) - p[axis]) / (double(q[axis]) - p[axis]);
+      AABB x;
+      for (int k = 0; k < 3; ++k) {
+        if (k == axis) {
+          x.lo[k] = x.hi[k] = pos;
+          continue;
+        }
+        const double c = double(p[k]) + t * (double(q[k]) - p[k]);
+        const double margin = std::max(std::fabs(double(p[k])), std::fabs(double(q[k]))) * 1e-13;
+        x.lo[k] = std::max(round_down(c - margin), std::min(p[k], q[k]));
+        x.hi[k] = std::min(round_up(c + margin), std::max(p[k], q[k]));
+      }
+      left.grow(x);
+      right.grow(x);
+    }
+  }
 }
 
 }  // namespace tb

@@ -18,6 +18,11 @@ namespace tb {
 // Bounds of triangle (a, b, c) clipped to the closed box `box`, as above; an empty box
 // (AABB::empty) when the triangle does not touch the box.
 AABB clip_triangle_bounds(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
+// Bounds of the parts of triangle v on either side of the plane x[axis] = pos (its vertices on
+// each side and the points where its edges cross the plane, rounded outward as above): the
+// spatial-split BVH builder's reference split (Stich et al. 2009, structures/bvh_spatial.h).
+// A side the triangle does not reach gets an empty box.
+void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AABB& right);
 // Area of the triangle clipped to the closed box, in double (for tests and statistics).
 double clipped_triangle_area(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
 
