@@ -1,0 +1,76 @@
+// Compressed 8-wide BVH (CS348K lecture 18 "compression"; Ylitie, Karras and Laine 2017,
+// "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs", §3.1): the child
+// boxes of a node are stored as 8-bit offsets in the node's local grid — an fp32 origin p and a
+// power-of-two cell size 2^e per axis — instead of 6 floats each. 80 bytes per node where the
+// MBVH8 layout (structures/mbvh.h) takes 256: 10 bytes per child, the lecture's "amortized 10
+// bytes per child, 3.2x compression".
+//
+// Layout (Ylitie et al.'s, adapted to the CPU leaf blocks): interior children of a node are stored
+// consecutively from `child_base` (slot i's node is child_base + meta[i]), the triangle blocks of
+// its leaf children consecutively from `block_base` (meta[i] = block offset | (triangles - 1) << 4,
+// so a leaf holds at most 16 triangles and a node's leaves at most 16 blocks). Leaves are the
+// MBVH8's TriBlock<8> SoA blocks, tested by the same watertight SIMD kernel.
+//
+// Conservative quantization: a child's box decodes as lo = p + q_lo * 2^e, hi = p + q_hi * 2^e in
+// float, with exactly the operations (and flush-to-zero mode) of the traversal's SIMD decode; the
+// builder picks q_lo as the largest and q_hi as the smallest 8-bit value for which the decoded
+// box still contains the true child box, checking the decoded floats themselves rather than
+// trusting an error bound. The decoded box therefore always contains the true box, at any offset
+// and for flat children; the traversal's slab test (Ize's padding) then sees a box at least as
+// large as the MBVH8's. Unused slots decode to boxes with lo > hi on every axis, which no ray
+// enters.
+#pragma once
+#include <cstdint>
+#include <string>
+
+#include "structures/aligned.h"
+#include "structures/mbvh.h"
+
+namespace tb {
+
+struct alignas(16) CWNode {
+  float p[3];          // grid origin (the node's box corner)
+  int8_t e[3];         // cell size 2^e per axis
+  uint8_t imask;       // bit i: slot i is an interior node
+  uint32_t child_base;  // first interior child node
+  uint32_t block_base;  // first triangle block of the leaf children
+  uint8_t meta[8];     // interior: rank among the interior children; leaf: offset | (tris - 1) << 4
+  uint8_t qlo[3][8];   // quantized child boxes, per axis and slot
+  uint8_t qhi[3][8];
+};
+static_assert(sizeof(CWNode) == 80);
+
+struct CWBVHStats {
+  uint32_t nodes = 0, leaves = 0, blocks = 0, max_depth = 0;
+  size_t node_bytes = 0, tri_bytes = 0;
+  double avg_children = 0;
+  double box_growth = 0;  // mean (decoded child area / true child area) - 1, over children with area
+  double compress_ms = 0;
+  std::string describe() const;
+};
+
+struct CWBVH {
+  aligned_vector<CWNode> nodes;          // nodes[0] = root
+  aligned_vector<TriBlock<8>> blocks;    // leaf triangles, each node's leaves contiguous
+  CWBVHStats stats;
+
+  // Re-lays out and quantizes an 8-wide MBVH with 8-wide blocks only (small_leaf = 0) and leaves
+  // of at most 16 triangles; throws std::invalid_argument otherwise.
+  static CWBVH compress(const MBVH<8, 8>& m);
+  // The decoded (conservative) box of slot i, computed as the traversal does.
+  AABB child_box(uint32_t node, int slot) const;
+  // Slot i's child in the MBVH reference format (mbvh_ref: interior = node index, leaf = first
+  // block and triangle count), or 0 for an unused slot of a node with no such child.
+  uint32_t child_ref(uint32_t node, int slot) const;
+  bool slot_used(uint32_t node, int slot) const;
+};
+
+// One axis of a node's grid: the cell size 2^e for origin p and largest coordinate hi, and the
+// 8-bit offsets of [lo, hi] (exposed for tests).
+float cw_scale(int8_t e);
+int8_t cw_exponent(float p, float hi_max);
+uint8_t cw_quantize_lo(float p, float s, float lo);
+uint8_t cw_quantize_hi(float p, float s, float hi);
+float cw_decode(float p, float s, uint8_t q);
+
+}  // namespace tb
