@@ -6,6 +6,9 @@
 #include <cmath>
 #include <cstdio>
 
+// Only for mbvh_params (SchemeConfig) and fetch_mbvh below, which belong in traversal/ (issue 15).
+#include "traversal/traverser.h"
+
 namespace tb {
 
 std::string MBVHBuildParams::key(int width, int tri_width) const {
