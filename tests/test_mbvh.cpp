@@ -5,7 +5,7 @@
 #include <random>
 
 #include "cachesim/hierarchy.h"
-#include "structures/mbvh.h"
+#include "traversal/mbvh_traverse.h"
 #include "test_util.h"
 
 namespace tb {

@@ -9,10 +9,10 @@
 // quantities the per-ray slab test computes, so by monotonic rounding they never cull a node any
 // ray of the packet would enter; frustum planes are fitted to the rays, proven to hold every ray
 // by a float check whose margin exceeds its rounding error, and are evaluated against boxes and
-// triangles with such a margin too. The watertight triangle test computes, per lane, the very
-// same sheared edge functions and hit distance as intersect_watertight (Woop et al. 2013) and
-// hands the rare lanes with a zero edge function (or a ray parallel to the plane) to the scalar
-// kernel, which decides those in double.
+// triangles with such a margin too. The box and triangle tests are the kernel library's
+// (traversal/kernels.h: slab<8>, watertight_inside<8>, moller<8>, plane<8>), so every lane
+// computes the very same values as the one-ray tests; the rare lanes whose ray is parallel to a
+// triangle's plane go to the scalar kernel.
 #pragma once
 #include <immintrin.h>
 
@@ -67,25 +67,22 @@ inline uint32_t range_mask(uint32_t g, uint32_t first, uint32_t last) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// 8-wide conservative slab test (kernels.h box_entry, lane-wise). Near/far planes are selected
-// per lane by the sign bit of the reciprocal direction (blendv reads the sign bit, so -0 -> -inf
-// selects like the scalar test). max/min put the possibly-NaN operand first: vmaxps/vminps return
-// the second operand when one is NaN, so an origin on a slab plane of a zero direction component
-// leaves that slab unconstrained, exactly as in the scalar test. Returns the lane mask of hits.
+// The kernel library's slab test (kernels.h slab, as box_entry: padded far distance), 8 rays
+// against one box. Near/far planes are selected per lane by the sign bit of the reciprocal
+// direction (blendv reads the sign bit, so -0 -> -inf selects like the scalar test). Returns the
+// lane mask of hits.
 inline uint32_t box_mask(const RayGroup& g, const BVHNode& n) {
-  const __m256 pad = _mm256_set1_ps(kFarPad);
-  __m256 tn = g.tmin, tf = g.tfar;
+  using S = simd::V<8>;
   const float* lo = &n.lo.x;
   const float* hi = &n.hi.x;
+  __m256 xn[3], xf[3];
   for (int a = 0; a < 3; ++a) {
-    const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[a]), g.o[a]), g.inv[a]);
-    const __m256 t2 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[a]), g.o[a]), g.inv[a]);
-    const __m256 near = _mm256_blendv_ps(t1, t2, g.inv[a]);
-    const __m256 far = _mm256_blendv_ps(t2, t1, g.inv[a]);
-    tn = _mm256_max_ps(near, tn);
-    tf = _mm256_min_ps(_mm256_mul_ps(far, pad), tf);
+    const __m256 l = _mm256_sub_ps(_mm256_set1_ps(lo[a]), g.o[a]), h = _mm256_sub_ps(_mm256_set1_ps(hi[a]), g.o[a]);
+    xn[a] = S::blendv(l, h, g.inv[a]);
+    xf[a] = S::blendv(h, l, g.inv[a]);
   }
-  return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
+  __m256 tn;
+  return uint32_t(S::mask(slab<8, false>(xn, xf, g.inv, g.inv, g.tmin, g.tfar, tn)));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -259,25 +256,22 @@ inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n) {
   const int s = p.gsign[g];
   const RayGroup& G = p.rg[g];
   if (s < 0) return box_mask(G, n);
-  const __m256 pad = _mm256_set1_ps(kFarPad);
-  __m256 tn = G.tmin, tf = G.tfar;
   const float* lo = &n.lo.x;
   const float* hi = &n.hi.x;
+  __m256 xn[3], xf[3];
   for (int a = 0; a < 3; ++a) {
     const bool neg = (s >> a) & 1;
     const float pn = neg ? hi[a] : lo[a], pf = neg ? lo[a] : hi[a];
-    __m256 xn, xf;
     if constexpr (kCommon) {
-      xn = _mm256_set1_ps(pn - p.org[a]);
-      xf = _mm256_set1_ps(pf - p.org[a]);
+      xn[a] = _mm256_set1_ps(pn - p.org[a]);
+      xf[a] = _mm256_set1_ps(pf - p.org[a]);
     } else {
-      xn = _mm256_sub_ps(_mm256_set1_ps(pn), G.o[a]);
-      xf = _mm256_sub_ps(_mm256_set1_ps(pf), G.o[a]);
+      xn[a] = _mm256_sub_ps(_mm256_set1_ps(pn), G.o[a]);
+      xf[a] = _mm256_sub_ps(_mm256_set1_ps(pf), G.o[a]);
     }
-    tn = _mm256_max_ps(_mm256_mul_ps(xn, G.inv[a]), tn);
-    tf = _mm256_min_ps(_mm256_mul_ps(_mm256_mul_ps(xf, G.inv[a]), pad), tf);
   }
-  return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
+  __m256 tn;
+  return uint32_t(_mm256_movemask_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
 }
 
 // group_box with the node's work hoisted out of the per-group loop: when every group of a
@@ -308,13 +302,8 @@ struct NodeTester {
   uint32_t operator()(uint32_t g) const {
     if (!pre) return group_box<kCommon>(p, g, n);
     const RayGroup& G = p.rg[g];
-    const __m256 pad = _mm256_set1_ps(kFarPad);
-    __m256 tn = G.tmin, tf = G.tfar;
-    for (int a = 0; a < 3; ++a) {
-      tn = _mm256_max_ps(_mm256_mul_ps(xn[a], G.inv[a]), tn);
-      tf = _mm256_min_ps(_mm256_mul_ps(_mm256_mul_ps(xf[a], G.inv[a]), pad), tf);
-    }
-    return uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(tn, tf, _CMP_LE_OQ)));
+    __m256 tn;
+    return uint32_t(_mm256_movemask_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
   }
 };
 
@@ -740,12 +729,12 @@ inline uint32_t tri_watertight(Packet& p, uint32_t g, uint32_t mask, const Trian
   __m256 Ax, Ay, Bx, By, Cx, Cy;
   if (T.kz >= 0) {
     const int kz = T.kz, kx = kz == 2 ? 0 : kz + 1, ky = kx == 2 ? 0 : kx + 1;
-    Ax = _mm256_sub_ps(A[kx], _mm256_mul_ps(T.sx, A[kz]));
-    Ay = _mm256_sub_ps(A[ky], _mm256_mul_ps(T.sy, A[kz]));
-    Bx = _mm256_sub_ps(B[kx], _mm256_mul_ps(T.sx, B[kz]));
-    By = _mm256_sub_ps(B[ky], _mm256_mul_ps(T.sy, B[kz]));
-    Cx = _mm256_sub_ps(C[kx], _mm256_mul_ps(T.sx, C[kz]));
-    Cy = _mm256_sub_ps(C[ky], _mm256_mul_ps(T.sy, C[kz]));
+    Ax = shear<8>(A[kx], T.sx, A[kz]);
+    Ay = shear<8>(A[ky], T.sy, A[kz]);
+    Bx = shear<8>(B[kx], T.sx, B[kz]);
+    By = shear<8>(B[ky], T.sy, B[kz]);
+    Cx = shear<8>(C[kx], T.sx, C[kz]);
+    Cy = shear<8>(C[ky], T.sy, C[kz]);
   } else {
     auto sh = [](const __m256* c, const __m256* v) {
       return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(c[0], v[0]), _mm256_mul_ps(c[1], v[1])),
@@ -753,152 +742,73 @@ inline uint32_t tri_watertight(Packet& p, uint32_t g, uint32_t mask, const Trian
     };
     Ax = sh(T.cx, A), Ay = sh(T.cy, A), Bx = sh(T.cx, B), By = sh(T.cy, B), Cx = sh(T.cx, C), Cy = sh(T.cy, C);
   }
-  const __m256 U = _mm256_sub_ps(_mm256_mul_ps(Cx, By), _mm256_mul_ps(Cy, Bx));
-  const __m256 V = _mm256_sub_ps(_mm256_mul_ps(Ax, Cy), _mm256_mul_ps(Ay, Cx));
-  const __m256 W = _mm256_sub_ps(_mm256_mul_ps(Bx, Ay), _mm256_mul_ps(By, Ax));
-  const __m256 zero = _mm256_setzero_ps();
-  const __m256 anyneg =
-      _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(U, zero, _CMP_LT_OQ), _mm256_cmp_ps(V, zero, _CMP_LT_OQ)),
-                   _mm256_cmp_ps(W, zero, _CMP_LT_OQ));
-  const __m256 anypos =
-      _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(U, zero, _CMP_GT_OQ), _mm256_cmp_ps(V, zero, _CMP_GT_OQ)),
-                   _mm256_cmp_ps(W, zero, _CMP_GT_OQ));
-  const __m256 anyzero =
-      _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(U, zero, _CMP_EQ_OQ), _mm256_cmp_ps(V, zero, _CMP_EQ_OQ)),
-                   _mm256_cmp_ps(W, zero, _CMP_EQ_OQ));
-  const uint32_t zmask = uint32_t(_mm256_movemask_ps(anyzero)) & mask;
-  // Inside (all edge functions of one sign) and not degenerate; zero lanes go to the scalar path.
-  const uint32_t inside = ~uint32_t(_mm256_movemask_ps(_mm256_and_ps(anyneg, anypos))) & mask & ~zmask;
-  uint32_t hits = 0;
-  if (inside) {
-    const __m256 det = _mm256_add_ps(_mm256_add_ps(U, V), W);
-    const uint32_t cand = inside & uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(det, zero, _CMP_NEQ_OQ)));
-    // The distance: exact_plane_distance's double-precision plane equation (kernels.h), 4 lanes
-    // at a time, the triangle's part hoisted (same expressions in the same order, so the same t
-    // as the scalar kernel). Lanes parallel in double take the scalar kernel's sheared fallback.
-    uint32_t parallel = 0;
-    if (cand) {
-      const double e1x = double(tri.v1.x) - tri.v0.x, e1y = double(tri.v1.y) - tri.v0.y,
-                   e1z = double(tri.v1.z) - tri.v0.z;
-      const double e2x = double(tri.v2.x) - tri.v0.x, e2y = double(tri.v2.y) - tri.v0.y,
-                   e2z = double(tri.v2.z) - tri.v0.z;
-      const __m256d nx = _mm256_set1_pd(e1y * e2z - e1z * e2y), ny = _mm256_set1_pd(e1z * e2x - e1x * e2z),
-                    nz = _mm256_set1_pd(e1x * e2y - e1y * e2x);
-      // Two halves of 4 lanes in double; same operations in the same order as the scalar code.
-      __m128 th[2];
-      const __m256d zd = _mm256_setzero_pd();
-      for (int h = 0; h < 2; ++h) {
-        auto half = [h](__m256 v) { return _mm256_cvtps_pd(h ? _mm256_extractf128_ps(v, 1) : _mm256_castps256_ps128(v)); };
-        const __m256d dn = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, half(T.d[0])), _mm256_mul_pd(ny, half(T.d[1]))),
-                                         _mm256_mul_pd(nz, half(T.d[2])));
-        __m256d num;
-        if constexpr (kCommon) {
-          const double ax = double(tri.v0.x) - p.org.x, ay = double(tri.v0.y) - p.org.y, az = double(tri.v0.z) - p.org.z;
-          num = _mm256_set1_pd(((e1y * e2z - e1z * e2y) * ax + (e1z * e2x - e1x * e2z) * ay) + (e1x * e2y - e1y * e2x) * az);
-        } else {
-          const __m256d ax = _mm256_sub_pd(_mm256_set1_pd(tri.v0.x), half(G.o[0]));
-          const __m256d ay = _mm256_sub_pd(_mm256_set1_pd(tri.v0.y), half(G.o[1]));
-          const __m256d az = _mm256_sub_pd(_mm256_set1_pd(tri.v0.z), half(G.o[2]));
-          num = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, ax), _mm256_mul_pd(ny, ay)), _mm256_mul_pd(nz, az));
-        }
-        parallel |= uint32_t(_mm256_movemask_pd(_mm256_cmp_pd(dn, zd, _CMP_EQ_OQ))) << (4 * h);
-        th[h] = _mm256_cvtpd_ps(_mm256_div_pd(num, dn));
-      }
-      parallel &= cand;
-      const __m256 t = _mm256_set_m128(th[1], th[0]);
-      hits = cand & ~parallel & uint32_t(_mm256_movemask_ps(
-          _mm256_and_ps(_mm256_cmp_ps(t, G.tmin, _CMP_GE_OQ), _mm256_cmp_ps(t, G.tfar, _CMP_LT_OQ))));
-      if (hits) {
-        const __m256 rdet = _mm256_div_ps(_mm256_set1_ps(1.f), det);
-        commit_hits(p, g, lane_mask_ps(hits), t, _mm256_mul_ps(V, rdet), _mm256_mul_ps(W, rdet), ts.prim_id[k]);
-      }
+  __m256 U, V, W, det;
+  const uint32_t cand = uint32_t(_mm256_movemask_ps(watertight_inside<8>(Ax, Ay, Bx, By, Cx, Cy, U, V, W, det))) & mask;
+  if (!cand) return 0;
+  // The distance: exact_plane_distance's double plane equation (kernels.h), 4 lanes at a time,
+  // the triangle's normal hoisted (the same operations in the same order, so the same t as the
+  // scalar kernel). Lanes parallel in double take the scalar kernel's sheared fallback.
+  using D = simd::D4v;
+  const Vec3D<double> v0 = to_double(tri.v0);
+  const Vec3D<double> nd = plane_normal(v0, to_double(tri.v1), to_double(tri.v2));
+  const Vec3D<D> n{D(nd.x), D(nd.y), D(nd.z)};
+  uint32_t parallel = 0;
+  __m128 th[2];
+  for (int h = 0; h < 2; ++h) {
+    auto half = [h](__m256 v) { return D(h ? _mm256_extractf128_ps(v, 1) : _mm256_castps256_ps128(v)); };
+    const D dn = plane_dot(n, Vec3D<D>{half(T.d[0]), half(T.d[1]), half(T.d[2])});
+    D num;
+    if constexpr (kCommon) {
+      num = D(plane_dot(nd, Vec3D<double>{v0.x - double(p.org.x), v0.y - double(p.org.y), v0.z - double(p.org.z)}));
+    } else {
+      num = plane_dot(n, Vec3D<D>{D(v0.x) - half(G.o[0]), D(v0.y) - half(G.o[1]), D(v0.z) - half(G.o[2])});
     }
-    for (uint32_t m = parallel; m; m &= m - 1)
-      if (scalar_lane<TriKernel::watertight>(p, g, std::countr_zero(m), ts, k)) hits |= 1u << std::countr_zero(m);
+    parallel |= uint32_t(dn.zero_mask()) << (4 * h);
+    th[h] = (num / dn).to_float();
   }
-  for (uint32_t m = zmask; m; m &= m - 1)
+  parallel &= cand;
+  const __m256 t = _mm256_set_m128(th[1], th[0]);
+  uint32_t hits = cand & ~parallel & uint32_t(_mm256_movemask_ps(
+      _mm256_and_ps(_mm256_cmp_ps(t, G.tmin, _CMP_GE_OQ), _mm256_cmp_ps(t, G.tfar, _CMP_LT_OQ))));
+  if (hits) {
+    const __m256 rdet = _mm256_div_ps(_mm256_set1_ps(1.f), det);
+    commit_hits(p, g, lane_mask_ps(hits), t, _mm256_mul_ps(V, rdet), _mm256_mul_ps(W, rdet), ts.prim_id[k]);
+  }
+  for (uint32_t m = parallel; m; m &= m - 1)
     if (scalar_lane<TriKernel::watertight>(p, g, std::countr_zero(m), ts, k)) hits |= 1u << std::countr_zero(m);
   return hits;
 }
 
-// Moller-Trumbore over 8 lanes, the formulas of intersect_moller.
+// Moller-Trumbore over 8 lanes: the kernel library's moller<8>.
 template <bool kCommon>
 inline uint32_t tri_moller(Packet& p, uint32_t g, uint32_t mask, const TriangleSet& ts, uint32_t k) {
   const TriVerts& tri = ts.verts[k];
   const RayGroup& G = p.rg[g];
-  const TriGroup& T = p.tg[g];
-  const Vec3 e1 = tri.v1 - tri.v0, e2 = tri.v2 - tri.v0;
-  const __m256 e1x = _mm256_set1_ps(e1.x), e1y = _mm256_set1_ps(e1.y), e1z = _mm256_set1_ps(e1.z);
-  const __m256 e2x = _mm256_set1_ps(e2.x), e2y = _mm256_set1_ps(e2.y), e2z = _mm256_set1_ps(e2.z);
-  auto mul = [](__m256 a, __m256 b) { return _mm256_mul_ps(a, b); };
-  auto sub = [](__m256 a, __m256 b) { return _mm256_sub_ps(a, b); };
-  auto add = [](__m256 a, __m256 b) { return _mm256_add_ps(a, b); };
-  const __m256 px = sub(mul(T.d[1], e2z), mul(T.d[2], e2y));
-  const __m256 py = sub(mul(T.d[2], e2x), mul(T.d[0], e2z));
-  const __m256 pz = sub(mul(T.d[0], e2y), mul(T.d[1], e2x));
-  const __m256 det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
-  const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-  uint32_t ok = mask & uint32_t(_mm256_movemask_ps(
-                           _mm256_cmp_ps(_mm256_and_ps(det, absmask), _mm256_set1_ps(1e-20f), _CMP_GE_OQ)));
-  if (!ok) return 0;
-  const __m256 inv = _mm256_div_ps(_mm256_set1_ps(1.f), det);
-  __m256 sx, sy, sz;
+  __m256 s[3];
   if constexpr (kCommon) {
-    const Vec3 s = p.org - tri.v0;
-    sx = _mm256_set1_ps(s.x), sy = _mm256_set1_ps(s.y), sz = _mm256_set1_ps(s.z);
+    const Vec3 sv = p.org - tri.v0;
+    s[0] = _mm256_set1_ps(sv.x), s[1] = _mm256_set1_ps(sv.y), s[2] = _mm256_set1_ps(sv.z);
   } else {
-    sx = sub(G.o[0], _mm256_set1_ps(tri.v0.x));
-    sy = sub(G.o[1], _mm256_set1_ps(tri.v0.y));
-    sz = sub(G.o[2], _mm256_set1_ps(tri.v0.z));
+    for (int a = 0; a < 3; ++a) s[a] = _mm256_sub_ps(G.o[a], _mm256_set1_ps(tri.v0[a]));
   }
-  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
-  const __m256 u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
-  ok &= uint32_t(_mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(u, zero, _CMP_GE_OQ), _mm256_cmp_ps(u, one, _CMP_LE_OQ))));
-  if (!ok) return 0;
-  const __m256 qx = sub(mul(sy, e1z), mul(sz, e1y));
-  const __m256 qy = sub(mul(sz, e1x), mul(sx, e1z));
-  const __m256 qz = sub(mul(sx, e1y), mul(sy, e1x));
-  const __m256 v = mul(add(add(mul(T.d[0], qx), mul(T.d[1], qy)), mul(T.d[2], qz)), inv);
-  ok &= uint32_t(_mm256_movemask_ps(
-      _mm256_and_ps(_mm256_cmp_ps(v, zero, _CMP_GE_OQ), _mm256_cmp_ps(add(u, v), one, _CMP_LE_OQ))));
-  if (!ok) return 0;
-  const __m256 t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
-  ok &= uint32_t(_mm256_movemask_ps(
-      _mm256_and_ps(_mm256_cmp_ps(t, G.tmin, _CMP_GE_OQ), _mm256_cmp_ps(t, G.tfar, _CMP_LT_OQ))));
-  if (ok) commit_hits(p, g, lane_mask_ps(ok), t, u, v, ts.prim_id[k]);
-  return ok;
+  __m256 t, u, v;
+  const __m256 ok = moller<8>(p.tg[g].d, s, tri, G.tmin, G.tfar, lane_mask_ps(mask), t, u, v);
+  const uint32_t hits = uint32_t(_mm256_movemask_ps(ok));
+  if (hits) commit_hits(p, g, ok, t, u, v, ts.prim_id[k]);
+  return hits;
 }
 
-// Precomputed planes (Appendix C), the formulas of intersect_plane; kApprox: rcpps reciprocal.
+// Precomputed planes (Appendix C): the kernel library's plane<8>; kApprox: rcpps reciprocal.
 template <bool kApprox, bool kCommon>
 inline uint32_t tri_plane(Packet& p, uint32_t g, uint32_t mask, const TriangleSet& ts, uint32_t k) {
   const PlaneTri& tri = ts.planes[k];
   const RayGroup& G = p.rg[g];
-  const TriGroup& T = p.tg[g];
-  auto mul = [](__m256 a, __m256 b) { return _mm256_mul_ps(a, b); };
-  auto add = [](__m256 a, __m256 b) { return _mm256_add_ps(a, b); };
-  auto bc = [](float x) { return _mm256_set1_ps(x); };
-  const __m256 dn = add(add(mul(T.d[0], bc(tri.n.x)), mul(T.d[1], bc(tri.n.y))), mul(T.d[2], bc(tri.n.z)));
-  const __m256 zero = _mm256_setzero_ps(), one = bc(1.f);
-  uint32_t ok = mask & uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(dn, zero, _CMP_NEQ_OQ)));
-  if (!ok) return 0;
-  const __m256 rcp = kApprox ? _mm256_rcp_ps(dn) : _mm256_div_ps(one, dn);
-  __m256 on;
-  if constexpr (kCommon) on = bc(p.org.x * tri.n.x + p.org.y * tri.n.y + p.org.z * tri.n.z);
-  else on = add(add(mul(G.o[0], bc(tri.n.x)), mul(G.o[1], bc(tri.n.y))), mul(G.o[2], bc(tri.n.z)));
-  const __m256 t = mul(_mm256_sub_ps(bc(tri.nd), on), rcp);
-  ok &= uint32_t(_mm256_movemask_ps(
-      _mm256_and_ps(_mm256_cmp_ps(t, G.tmin, _CMP_GE_OQ), _mm256_cmp_ps(t, G.tfar, _CMP_LT_OQ))));
-  if (!ok) return 0;
-  const __m256 px = add(G.o[0], mul(T.d[0], t)), py = add(G.o[1], mul(T.d[1], t)), pz = add(G.o[2], mul(T.d[2], t));
-  const __m256 u = add(add(add(mul(px, bc(tri.u.x)), mul(py, bc(tri.u.y))), mul(pz, bc(tri.u.z))), bc(tri.ud));
-  ok &= uint32_t(_mm256_movemask_ps(_mm256_and_ps(_mm256_cmp_ps(u, zero, _CMP_GE_OQ), _mm256_cmp_ps(u, one, _CMP_LE_OQ))));
-  if (!ok) return 0;
-  const __m256 v = add(add(add(mul(px, bc(tri.v.x)), mul(py, bc(tri.v.y))), mul(pz, bc(tri.v.z))), bc(tri.vd));
-  ok &= uint32_t(_mm256_movemask_ps(
-      _mm256_and_ps(_mm256_cmp_ps(v, zero, _CMP_GE_OQ), _mm256_cmp_ps(add(u, v), one, _CMP_LE_OQ))));
-  if (ok) commit_hits(p, g, lane_mask_ps(ok), t, u, v, ts.prim_id[k]);
-  return ok;
+  const __m256 on = kCommon ? _mm256_set1_ps(dot(p.org, tri.n)) : plane_offset<8>(G.o, tri.n);
+  __m256 t, u, v;
+  const __m256 ok = plane<8, kApprox>(G.o, p.tg[g].d, on, tri, G.tmin, G.tfar, lane_mask_ps(mask), t, u, v);
+  const uint32_t hits = uint32_t(_mm256_movemask_ps(ok));
+  if (hits) commit_hits(p, g, ok, t, u, v, ts.prim_id[k]);
+  return hits;
 }
 
 // Tests triangle k against the lanes `mask` of group g with kernel K; returns the lanes that hit.

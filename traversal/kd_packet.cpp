@@ -58,29 +58,14 @@ KDData fetch_kd(const Scene& scene, StructureCache& cache, const KDBuildParams& 
   return d;
 }
 
-// ---- small AVX2 helpers ---------------------------------------------------------------------
-inline __m256 v1(float x) { return _mm256_set1_ps(x); }
-inline __m256 vadd(__m256 a, __m256 b) { return _mm256_add_ps(a, b); }
-inline __m256 vsub(__m256 a, __m256 b) { return _mm256_sub_ps(a, b); }
-inline __m256 vmul(__m256 a, __m256 b) { return _mm256_mul_ps(a, b); }
-inline __m256 vand(__m256 a, __m256 b) { return _mm256_and_ps(a, b); }
-inline __m256 vor(__m256 a, __m256 b) { return _mm256_or_ps(a, b); }
-inline __m256 vandnot(__m256 a, __m256 b) { return _mm256_andnot_ps(a, b); }  // ~a & b
-inline __m256 vle(__m256 a, __m256 b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
-inline __m256 vlt(__m256 a, __m256 b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
-inline __m256 vgt(__m256 a, __m256 b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
-inline __m256 vge(__m256 a, __m256 b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
-inline __m256 veq(__m256 a, __m256 b) { return _mm256_cmp_ps(a, b, _CMP_EQ_OQ); }
-inline __m256 vneq(__m256 a, __m256 b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
-inline __m256 vsel(__m256 f, __m256 t, __m256 m) { return _mm256_blendv_ps(f, t, m); }  // m ? t : f
-inline int vmask(__m256 m) { return _mm256_movemask_ps(m); }
-inline __m256 vabs(__m256 a) { return _mm256_andnot_ps(v1(-0.f), a); }
+// The suite's one SIMD wrapper (traversal/simd.h), 8 lanes.
+using S = simd::V<8>;
 // kd_pad_up / kd_pad_down of structures/kdtree.h, lane by lane: x * (1 +- copysign(pad, x)).
 inline __m256 vpad_up(__m256 x) {
-  return vmul(x, vadd(v1(1.f), vor(v1(kKdPad), vand(x, v1(-0.f)))));
+  return S::mul(x, S::add(S::set1(1.f), S::or_(S::set1(kKdPad), S::and_(x, S::set1(-0.f)))));
 }
 inline __m256 vpad_down(__m256 x) {
-  return vmul(x, vsub(v1(1.f), vor(v1(kKdPad), vand(x, v1(-0.f)))));
+  return S::mul(x, S::sub(S::set1(1.f), S::or_(S::set1(kKdPad), S::and_(x, S::set1(-0.f)))));
 }
 
 // The 8-ray groups of a sub-packet that still take part are a bit mask (at most 32 groups).
@@ -201,7 +186,7 @@ class KDPacket final : public TraverserBase<KDPacket> {
   // Active lanes of group g: tnear <= min(tfar, limit).
   static __m256 active(const Workspace& ws, uint32_t g) {
     const __m256 tn = _mm256_load_ps(ws.tn + 8 * g), tf = _mm256_load_ps(ws.tf + 8 * g);
-    return vle(tn, _mm256_min_ps(tf, _mm256_load_ps(ws.lim + 8 * g)));
+    return S::le(tn, _mm256_min_ps(tf, _mm256_load_ps(ws.lim + 8 * g)));
   }
 
   template <TriKernel K, class P>
@@ -225,22 +210,22 @@ class KDPacket final : public TraverserBase<KDPacket> {
         const int a = nd->axis();
         const uint32_t neg = (oct >> a) & 1u;
         const uint32_t near = nd->left() + neg, far = nd->left() + (neg ^ 1u);
-        const __m256 split = v1(nd->split());
+        const __m256 split = S::set1(nd->split());
         uint32_t near_groups = 0, far_groups = 0, nan_groups = 0;
         int visitors = 0;
         TB_FOR_GROUPS(g, groups) {
           const __m256 tn = _mm256_load_ps(ws.tn + 8 * g), tf = _mm256_load_ps(ws.tf + 8 * g);
           const __m256 lim = _mm256_min_ps(tf, _mm256_load_ps(ws.lim + 8 * g));
-          const __m256 d = vmul(vsub(split, _mm256_load_ps(org[a] + 8 * g)), _mm256_load_ps(inv[a] + 8 * g));
+          const __m256 d = S::mul(S::sub(split, _mm256_load_ps(org[a] + 8 * g)), _mm256_load_ps(inv[a] + 8 * g));
           // min_ps/max_ps return their second operand when either is NaN: a NaN distance keeps
           // the whole interval for both children, as in kd_single.
           const __m256 tfn = _mm256_min_ps(vpad_up(d), tf);
           const __m256 tnf = _mm256_max_ps(vpad_down(d), tn);
           _mm256_store_ps(ws.tf_near + 8 * g, tfn);
           _mm256_store_ps(ws.tn_far + 8 * g, tnf);
-          const int mn = vmask(vle(tn, _mm256_min_ps(tfn, lim)));
-          const int mf = vmask(vle(tnf, lim));
-          const int nan = vmask(_mm256_cmp_ps(d, d, _CMP_UNORD_Q)) & mf;
+          const int mn = S::mask(S::le(tn, _mm256_min_ps(tfn, lim)));
+          const int mf = S::mask(S::le(tnf, lim));
+          const int nan = S::mask(_mm256_cmp_ps(d, d, _CMP_UNORD_Q)) & mf;
           ws.nan_now[g] = uint8_t(nan);
           near_groups |= uint32_t(mn != 0) << g;
           far_groups |= uint32_t(mf != 0) << g;
@@ -298,7 +283,7 @@ class KDPacket final : public TraverserBase<KDPacket> {
             probe.read(ws.stn[sp] + 8 * g, 32);
             probe.read(ws.stf[sp] + 8 * g, 32);
           }
-          alive |= uint32_t(vmask(active(ws, g)) != 0) << g;
+          alive |= uint32_t(S::mask(active(ws, g)) != 0) << g;
         }
         if (alive) {
           node = lv.node, groups = alive;
@@ -324,7 +309,7 @@ class KDPacket final : public TraverserBase<KDPacket> {
     int finished = 0, visitors = 0;
     TB_FOR_GROUPS(g, groups) {
       const __m256 m = active(ws, g);
-      const int bits = vmask(m);
+      const int bits = S::mask(m);
       if (!bits) continue;
       visitors += __builtin_popcount(unsigned(bits));
       const int o = int(8 * g);
@@ -346,10 +331,10 @@ class KDPacket final : public TraverserBase<KDPacket> {
           _mm256_xor_si256(_mm256_cmpeq_epi32(h.prim, _mm256_set1_epi32(int(kNoHit))), _mm256_set1_epi32(-1)));
       const __m256 free = _mm256_castsi256_ps(
           _mm256_cmpeq_epi32(_mm256_load_si256((const __m256i*)(ws.in_plane + o)), _mm256_setzero_si256()));
-      const __m256 done = vand(vand(vand(m, found), free), vle(h.t, _mm256_load_ps(ws.tf + o)));
+      const __m256 done = S::and_(S::and_(S::and_(m, found), free), S::le(h.t, _mm256_load_ps(ws.tf + o)));
       const __m256 lim = _mm256_min_ps(_mm256_load_ps(ws.lim + o), h.t);
-      _mm256_store_ps(ws.lim + o, vsel(lim, v1(-INFINITY), done));
-      finished += __builtin_popcount(unsigned(vmask(done)));
+      _mm256_store_ps(ws.lim + o, S::blendv(lim, S::set1(-INFINITY), done));
+      finished += __builtin_popcount(unsigned(S::mask(done)));
     }
     if (visitors) probe.leaf(&nd, sizeof(KDNode), uint32_t(visitors));
     return finished;
@@ -381,115 +366,63 @@ class KDPacket final : public TraverserBase<KDPacket> {
   }
   // Records the hits of mask `ok` with distance t and barycentrics u, v.
   static void commit(HitGroup& h, __m256 ok, __m256 t, __m256 u, __m256 v, uint32_t prim) {
-    h.t = vsel(h.t, t, ok);
-    h.u = vsel(h.u, u, ok);
-    h.v = vsel(h.v, v, ok);
+    h.t = S::blendv(h.t, t, ok);
+    h.u = S::blendv(h.u, u, ok);
+    h.v = S::blendv(h.v, v, ok);
     h.prim = _mm256_blendv_epi8(h.prim, _mm256_set1_epi32(int(prim)), _mm256_castps_si256(ok));
   }
 
-  // intersect_watertight (kernels.h), 8 rays against one triangle, same operations in the same
-  // order; the per-ray axis permutation (kx, ky, kz) becomes two blends per selected component.
+  // The kernel library's watertight test (kernels.h), 8 rays against one triangle; the per-ray
+  // axis permutation (kx, ky, kz) becomes two blends per selected component.
   static void watertight8(const TriVerts& tri, uint32_t prim, const RayGroup& r, __m256 m, HitGroup& h) {
-    auto pick = [](__m256 x, __m256 y, __m256 z, __m256 m0, __m256 m1) { return vsel(vsel(z, y, m1), x, m0); };
-    const __m256 Ax_ = vsub(v1(tri.v0.x), r.ox), Ay_ = vsub(v1(tri.v0.y), r.oy), Az_ = vsub(v1(tri.v0.z), r.oz);
-    const __m256 Bx_ = vsub(v1(tri.v1.x), r.ox), By_ = vsub(v1(tri.v1.y), r.oy), Bz_ = vsub(v1(tri.v1.z), r.oz);
-    const __m256 Cx_ = vsub(v1(tri.v2.x), r.ox), Cy_ = vsub(v1(tri.v2.y), r.oy), Cz_ = vsub(v1(tri.v2.z), r.oz);
+    auto pick = [](__m256 x, __m256 y, __m256 z, __m256 m0, __m256 m1) { return S::blendv(S::blendv(z, y, m1), x, m0); };
+    const __m256 Ax_ = S::sub(S::set1(tri.v0.x), r.ox), Ay_ = S::sub(S::set1(tri.v0.y), r.oy), Az_ = S::sub(S::set1(tri.v0.z), r.oz);
+    const __m256 Bx_ = S::sub(S::set1(tri.v1.x), r.ox), By_ = S::sub(S::set1(tri.v1.y), r.oy), Bz_ = S::sub(S::set1(tri.v1.z), r.oz);
+    const __m256 Cx_ = S::sub(S::set1(tri.v2.x), r.ox), Cy_ = S::sub(S::set1(tri.v2.y), r.oy), Cz_ = S::sub(S::set1(tri.v2.z), r.oz);
     const __m256 Akz = pick(Ax_, Ay_, Az_, r.kz0, r.kz1), Bkz = pick(Bx_, By_, Bz_, r.kz0, r.kz1),
                  Ckz = pick(Cx_, Cy_, Cz_, r.kz0, r.kz1);
-    const __m256 Ax = vsub(pick(Ax_, Ay_, Az_, r.kx0, r.kx1), vmul(r.sx, Akz));
-    const __m256 Ay = vsub(pick(Ax_, Ay_, Az_, r.ky0, r.ky1), vmul(r.sy, Akz));
-    const __m256 Bx = vsub(pick(Bx_, By_, Bz_, r.kx0, r.kx1), vmul(r.sx, Bkz));
-    const __m256 By = vsub(pick(Bx_, By_, Bz_, r.ky0, r.ky1), vmul(r.sy, Bkz));
-    const __m256 Cx = vsub(pick(Cx_, Cy_, Cz_, r.kx0, r.kx1), vmul(r.sx, Ckz));
-    const __m256 Cy = vsub(pick(Cx_, Cy_, Cz_, r.ky0, r.ky1), vmul(r.sy, Ckz));
-    __m256 U = vsub(vmul(Cx, By), vmul(Cy, Bx));
-    __m256 V = vsub(vmul(Ax, Cy), vmul(Ay, Cx));
-    __m256 W = vsub(vmul(Bx, Ay), vmul(By, Ax));
-    const __m256 zero = v1(0.f);
-    const int zmask = vmask(vand(m, vor(vor(veq(U, zero), veq(V, zero)), veq(W, zero))));
-    if (zmask) [[unlikely]] {
-      // An edge passes (numerically) through the ray: decide in double, as the scalar kernel.
-      alignas(32) float a[6][8], uvw[3][8];
-      _mm256_store_ps(a[0], Ax), _mm256_store_ps(a[1], Ay), _mm256_store_ps(a[2], Bx);
-      _mm256_store_ps(a[3], By), _mm256_store_ps(a[4], Cx), _mm256_store_ps(a[5], Cy);
-      _mm256_store_ps(uvw[0], U), _mm256_store_ps(uvw[1], V), _mm256_store_ps(uvw[2], W);
-      for (int i = 0; i < 8; ++i) {
-        if (!(zmask >> i & 1)) continue;
-        const double ax = a[0][i], ay = a[1][i], bx = a[2][i], by = a[3][i], cx = a[4][i], cy = a[5][i];
-        uvw[0][i] = float(cx * by - cy * bx);
-        uvw[1][i] = float(ax * cy - ay * cx);
-        uvw[2][i] = float(bx * ay - by * ax);
-      }
-      U = _mm256_load_ps(uvw[0]), V = _mm256_load_ps(uvw[1]), W = _mm256_load_ps(uvw[2]);
-    }
-    const __m256 negative = vor(vor(vlt(U, zero), vlt(V, zero)), vlt(W, zero));
-    const __m256 positive = vor(vor(vgt(U, zero), vgt(V, zero)), vgt(W, zero));
-    const __m256 det = vadd(vadd(U, V), W);
-    __m256 ok = vandnot(vand(negative, positive), vand(m, vneq(det, zero)));
-    if (!vmask(ok)) return;
-    const __m256 inv_det = _mm256_div_ps(v1(1.f), det);
+    const __m256 Ax = shear<8>(pick(Ax_, Ay_, Az_, r.kx0, r.kx1), r.sx, Akz);
+    const __m256 Ay = shear<8>(pick(Ax_, Ay_, Az_, r.ky0, r.ky1), r.sy, Akz);
+    const __m256 Bx = shear<8>(pick(Bx_, By_, Bz_, r.kx0, r.kx1), r.sx, Bkz);
+    const __m256 By = shear<8>(pick(Bx_, By_, Bz_, r.ky0, r.ky1), r.sy, Bkz);
+    const __m256 Cx = shear<8>(pick(Cx_, Cy_, Cz_, r.kx0, r.kx1), r.sx, Ckz);
+    const __m256 Cy = shear<8>(pick(Cx_, Cy_, Cz_, r.ky0, r.ky1), r.sy, Ckz);
+    __m256 U, V, W, det;
+    __m256 ok = S::and_(m, watertight_inside<8>(Ax, Ay, Bx, By, Cx, Cy, U, V, W, det));
+    if (!S::mask(ok)) return;
+    const __m256 inv_det = _mm256_div_ps(S::set1(1.f), det);
     // As intersect_watertight: t from exact_plane_distance (double) for the lanes that passed the
     // inside test, the sheared T/det only where the ray is parallel to the plane (NaN).
     alignas(32) float tl[8];
-    _mm256_store_ps(tl, vmul(vmul(r.sz, vadd(vadd(vmul(U, Akz), vmul(V, Bkz)), vmul(W, Ckz))), inv_det));
-    for (int bits = vmask(ok); bits; bits &= bits - 1) {
+    _mm256_store_ps(tl, sheared_distance<8>(r.sz, U, V, W, Akz, Bkz, Ckz, inv_det));
+    for (int bits = S::mask(ok); bits; bits &= bits - 1) {
       const int i = __builtin_ctz(unsigned(bits)), j = r.o + i;
       const float te = exact_plane_distance({r.ws->ox[j], r.ws->oy[j], r.ws->oz[j]},
                                             {r.ws->dx[j], r.ws->dy[j], r.ws->dz[j]}, tri);
       if (!std::isnan(te)) tl[i] = te;
     }
     const __m256 t = _mm256_load_ps(tl);
-    ok = vand(ok, vand(vge(t, r.tmin), vlt(t, h.t)));
-    if (!vmask(ok)) return;
-    commit(h, ok, t, vmul(V, inv_det), vmul(W, inv_det), prim);
+    ok = S::and_(ok, S::and_(S::ge(t, r.tmin), S::lt(t, h.t)));
+    if (!S::mask(ok)) return;
+    commit(h, ok, t, S::mul(V, inv_det), S::mul(W, inv_det), prim);
   }
 
-  // intersect_moller (kernels.h), 8-wide.
+  // The kernel library's moller<8>.
   static void moller8(const TriVerts& tri, uint32_t prim, const RayGroup& r, __m256 m, HitGroup& h) {
-    const Vec3 e1 = tri.v1 - tri.v0, e2 = tri.v2 - tri.v0;
-    const __m256 px = vsub(vmul(r.dy, v1(e2.z)), vmul(r.dz, v1(e2.y)));
-    const __m256 py = vsub(vmul(r.dz, v1(e2.x)), vmul(r.dx, v1(e2.z)));
-    const __m256 pz = vsub(vmul(r.dx, v1(e2.y)), vmul(r.dy, v1(e2.x)));
-    const __m256 det = vadd(vadd(vmul(v1(e1.x), px), vmul(v1(e1.y), py)), vmul(v1(e1.z), pz));
-    __m256 ok = vandnot(vlt(vabs(det), v1(1e-20f)), m);
-    if (!vmask(ok)) return;
-    const __m256 inv_det = _mm256_div_ps(v1(1.f), det);
-    const __m256 sx = vsub(r.ox, v1(tri.v0.x)), sy = vsub(r.oy, v1(tri.v0.y)), sz = vsub(r.oz, v1(tri.v0.z));
-    const __m256 u = vmul(vadd(vadd(vmul(sx, px), vmul(sy, py)), vmul(sz, pz)), inv_det);
-    ok = vandnot(vor(vlt(u, v1(0.f)), vgt(u, v1(1.f))), ok);
-    const __m256 qx = vsub(vmul(sy, v1(e1.z)), vmul(sz, v1(e1.y)));
-    const __m256 qy = vsub(vmul(sz, v1(e1.x)), vmul(sx, v1(e1.z)));
-    const __m256 qz = vsub(vmul(sx, v1(e1.y)), vmul(sy, v1(e1.x)));
-    const __m256 v = vmul(vadd(vadd(vmul(r.dx, qx), vmul(r.dy, qy)), vmul(r.dz, qz)), inv_det);
-    ok = vandnot(vor(vlt(v, v1(0.f)), vgt(vadd(u, v), v1(1.f))), ok);
-    const __m256 t = vmul(vadd(vadd(vmul(v1(e2.x), qx), vmul(v1(e2.y), qy)), vmul(v1(e2.z), qz)), inv_det);
-    ok = vand(ok, vand(vge(t, r.tmin), vlt(t, h.t)));
-    if (!vmask(ok)) return;
-    commit(h, ok, t, u, v, prim);
+    const __m256 d[3] = {r.dx, r.dy, r.dz};
+    const __m256 s[3] = {S::sub(r.ox, S::set1(tri.v0.x)), S::sub(r.oy, S::set1(tri.v0.y)), S::sub(r.oz, S::set1(tri.v0.z))};
+    __m256 t, u, v;
+    const __m256 ok = moller<8>(d, s, tri, r.tmin, h.t, m, t, u, v);
+    if (S::mask(ok)) commit(h, ok, t, u, v, prim);
   }
 
-  // intersect_plane (kernels.h, thesis Appendix C), 8-wide; kApproxRcp uses rcpps as the thesis.
+  // The kernel library's plane<8> (thesis Appendix C); kApproxRcp uses rcpps as the thesis.
   template <bool kApproxRcp>
   static void plane8(const PlaneTri& tri, uint32_t prim, const RayGroup& r, __m256 m, HitGroup& h) {
-    const __m256 dn = vadd(vadd(vmul(r.dx, v1(tri.n.x)), vmul(r.dy, v1(tri.n.y))), vmul(r.dz, v1(tri.n.z)));
-    __m256 ok = vand(m, vneq(dn, v1(0.f)));
-    if (!vmask(ok)) return;
-    __m256 rcp;
-    if constexpr (kApproxRcp) rcp = _mm256_rcp_ps(dn);
-    else rcp = _mm256_div_ps(v1(1.f), dn);
-    const __m256 on = vadd(vadd(vmul(r.ox, v1(tri.n.x)), vmul(r.oy, v1(tri.n.y))), vmul(r.oz, v1(tri.n.z)));
-    const __m256 t = vmul(vsub(v1(tri.nd), on), rcp);
-    ok = vand(ok, vand(vge(t, r.tmin), vlt(t, h.t)));
-    if (!vmask(ok)) return;
-    const __m256 px = vadd(r.ox, vmul(r.dx, t)), py = vadd(r.oy, vmul(r.dy, t)), pz = vadd(r.oz, vmul(r.dz, t));
-    const __m256 u =
-        vadd(vadd(vadd(vmul(px, v1(tri.u.x)), vmul(py, v1(tri.u.y))), vmul(pz, v1(tri.u.z))), v1(tri.ud));
-    ok = vandnot(vor(vlt(u, v1(0.f)), vgt(u, v1(1.f))), ok);
-    const __m256 v =
-        vadd(vadd(vadd(vmul(px, v1(tri.v.x)), vmul(py, v1(tri.v.y))), vmul(pz, v1(tri.v.z))), v1(tri.vd));
-    ok = vandnot(vor(vlt(v, v1(0.f)), vgt(vadd(u, v), v1(1.f))), ok);
-    if (!vmask(ok)) return;
-    commit(h, ok, t, u, v, prim);
+    const __m256 o[3] = {r.ox, r.oy, r.oz}, d[3] = {r.dx, r.dy, r.dz};
+    __m256 t, u, v;
+    const __m256 ok = plane<8, kApproxRcp>(o, d, plane_offset<8>(o, tri.n), tri, r.tmin, h.t, m, t, u, v);
+    if (S::mask(ok)) commit(h, ok, t, u, v, prim);
   }
 
   SchemeConfig cfg_;

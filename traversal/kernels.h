@@ -1,4 +1,11 @@
-// Ray/box and ray/triangle kernels shared by every scheme.
+// The kernel library: every ray/box and ray/triangle test of the suite, each written ONCE as a
+// template over the lane count L of simd::V<L> (traversal/simd.h: 1 = one ray, 4 = SSE, 8 = AVX2)
+// and instantiated by every scheme: the single-ray schemes call the L = 1 wrappers at the end of
+// this file (box_entry, intersect_watertight, intersect_moller, intersect_plane), the MBVH node
+// and block tests, the packet and stream kernels call the templates with L = 4 or 8, so that the
+// same float operations run in the same order in every scheme (-ffp-contract=off) and the SIMD
+// schemes return bit-identical hits to the scalar ones (tests/test_kernels.cpp, test_mbvh.cpp,
+// test_packets.cpp, test_kdtree.cpp check it).
 //
 // Defaults are robust: the watertight triangle test of Woop, Benthin and Wald (JCGT 2013) and the
 // conservative slab test of Ize (JCGT 2013, "Robust BVH Ray Traversal": the far distance is
@@ -7,24 +14,26 @@
 // robustness costs (issue "Accuracy"): Moller-Trumbore (1997), and the precomputed-plane test the
 // thesis' MBVH/RS kernel uses (Appendix C; Havel & Herout 2010), with an exact or an
 // approximate (rcpps, 12-bit) reciprocal.
+//
+// What stays with the callers is only where the lanes come from (which rays, which triangles,
+// which axis permutation): e.g. one ray against a TriBlock's W triangles (block_intersect), eight
+// rays against one triangle (the packet kernels), two rays against four triangles (the stream's
+// pair kernel). The arithmetic is here.
 #pragma once
 #include <immintrin.h>
 
+#include <bit>
 #include <cmath>
 #include <cstdint>
-#include <string_view>
-#include <vector>
+#include <type_traits>
+#include <utility>
 
+#include "structures/triangles.h"
 #include "structures/vec3.h"
+#include "traversal/simd.h"
 #include "workloads/ray_batch.h"
 
 namespace tb {
-
-enum class TriKernel : uint8_t { watertight, moller, plane, plane_rcp };
-inline constexpr TriKernel kAllTriKernels[] = {TriKernel::watertight, TriKernel::moller, TriKernel::plane,
-                                               TriKernel::plane_rcp};
-std::string_view kernel_name(TriKernel k);
-TriKernel parse_kernel(std::string_view name);  // throws InputError on unknown names
 
 // gamma(n) of Pharr/Jakob/Humphreys: bound on the relative error of n float operations.
 inline constexpr float kUlp = 0x1p-24f;
@@ -54,91 +63,180 @@ struct RayCtx {
   }
 };
 
-// Conservative slab test (Williams et al. 2005 sign-selected slabs, Ize 2013 padding); returns
-// the entry distance or +inf on a miss. tfar is the current closest hit (or ray tmax).
-// A zero direction component gives inv = +-inf, and (plane - org) * inf is NaN exactly when the
-// origin lies on that slab plane, where the ray runs inside the closed slab for every t. The
-// max/min below keep their first argument when the second is NaN (std::max(a, b) is
-// a < b ? b : a), so such a slab constrains nothing — the right answer, with no branch.
-inline float box_entry(const RayCtx& r, const Vec3& lo, const Vec3& hi, float tmin, float tfar) {
-  const float nx = ((r.near_x ? hi.x : lo.x) - r.org.x) * r.inv.x;
-  const float fx = ((r.near_x ? lo.x : hi.x) - r.org.x) * r.inv.x;
-  const float ny = ((r.near_y ? hi.y : lo.y) - r.org.y) * r.inv.y;
-  const float fy = ((r.near_y ? lo.y : hi.y) - r.org.y) * r.inv.y;
-  const float nz = ((r.near_z ? hi.z : lo.z) - r.org.z) * r.inv.z;
-  const float fz = ((r.near_z ? lo.z : hi.z) - r.org.z) * r.inv.z;
-  const float tn = std::max(std::max(std::max(tmin, nx), ny), nz);
-  const float tf = std::min(std::min(std::min(tfar, fx * kFarPad), fy * kFarPad), fz * kFarPad);
-  return tn <= tf ? tn : INFINITY;
+// =============================================================================================
+// Conservative slab test (Williams et al. 2005 sign-selected slabs, Ize 2013 padding), L lanes.
+// xn/xf: per axis the near and far plane minus the origin (the caller selects the planes by the
+// sign of the reciprocal direction); rn: the reciprocal direction; rf: the far reciprocal.
+// kPadRcp = false pads the far distance, (xf * rn) * kFarPad (box_entry's order; rf unused);
+// kPadRcp = true takes rf = rn * kFarPad precomputed per ray, xf * rf (the MBVH layouts' order,
+// one multiply fewer per box: the same rounding count — subtract, reciprocal, pad, multiply — so
+// the same bound holds). Returns the lanes whose box is entered before `tfar`, the entry
+// distance in tn.
+// A zero direction component gives rn = +-inf, and (plane - org) * inf is NaN exactly when the
+// origin lies on that slab plane, where the ray runs inside the closed slab for every t.
+// simd::V's min/max return their SECOND operand when either is NaN, so the new slab value goes
+// first and the running bound second: such a slab constrains nothing — the right answer, with no
+// branch.
+template <int L, bool kPadRcp>
+[[gnu::always_inline]] inline typename simd::V<L>::m slab(const typename simd::V<L>::f xn[3],
+                                                          const typename simd::V<L>::f xf[3],
+                                                          const typename simd::V<L>::f rn[3],
+                                                          const typename simd::V<L>::f rf[3],
+                                                          typename simd::V<L>::f tmin, typename simd::V<L>::f tfar,
+                                                          typename simd::V<L>::f& tn) {
+  using S = simd::V<L>;
+  typename S::f n = tmin, f = tfar;
+  for (int a = 0; a < 3; ++a) {
+    n = S::max(S::mul(xn[a], rn[a]), n);
+    if constexpr (kPadRcp) f = S::min(S::mul(xf[a], rf[a]), f);
+    else f = S::min(S::mul(S::mul(xf[a], rn[a]), S::set1(kFarPad)), f);
+  }
+  tn = n;
+  return S::le(n, f);
 }
 
-// Triangles in the order a structure stores them, with what each kernel needs.
-struct TriVerts {
-  Vec3 v0, v1, v2;
-};
-// Precomputed planes (thesis Appendix C): plane n.x = d, and two edge planes whose values at the
-// hit point are the barycentric coordinates u, v.
-struct alignas(16) PlaneTri {
-  Vec3 n; float nd;
-  Vec3 u; float ud;
-  Vec3 v; float vd;
-};
-static_assert(sizeof(PlaneTri) == 48);
-
-struct TriangleSet {
-  std::vector<TriVerts> verts;      // always present
-  std::vector<PlaneTri> planes;     // only for the plane kernels
-  std::vector<uint32_t> prim_id;    // stored position -> scene triangle index
-  size_t size() const { return verts.size(); }
-  // `order[i]` = scene triangle stored at position i.
-  template <class SceneT>
-  void build(const SceneT& scene, const std::vector<uint32_t>& order, TriKernel k);
-  const void* data_at(uint32_t i, TriKernel k) const {
-    return k == TriKernel::plane || k == TriKernel::plane_rcp ? static_cast<const void*>(&planes[i])
-                                                                : static_cast<const void*>(&verts[i]);
-  }
-  static constexpr uint32_t bytes(TriKernel k) {
-    return k == TriKernel::plane || k == TriKernel::plane_rcp ? sizeof(PlaneTri) : sizeof(TriVerts);
-  }
-};
-PlaneTri make_plane_tri(const TriVerts& t);
-
-// Distance along the ray to the plane of `tri`, for a candidate that already passed a watertight
-// inside test (one or two per ray): NaN when the ray is parallel to the plane.
-// Why not T/det: the sheared distance loses up to ~1e-3 relative on long, thin triangles (the edge
-// functions cancel), and even the float plane equation loses eps * |edge| / cos(angle) on grazing
-// hits — both beyond the suite's 1e-5 accuracy bar on real scenes (measured on lucy, conference).
-// Differences of floats are exact in double, so this is accurate to the last bit of the float
-// result. SIMD kernels call it for the lanes that hit.
-inline float exact_plane_distance(const Vec3& org, const Vec3& dir, const TriVerts& tri) {
-  const double ax = double(tri.v0.x) - org.x, ay = double(tri.v0.y) - org.y, az = double(tri.v0.z) - org.z;
-  const double e1x = double(tri.v1.x) - tri.v0.x, e1y = double(tri.v1.y) - tri.v0.y, e1z = double(tri.v1.z) - tri.v0.z;
-  const double e2x = double(tri.v2.x) - tri.v0.x, e2y = double(tri.v2.y) - tri.v0.y, e2z = double(tri.v2.z) - tri.v0.z;
-  const double nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
-  const double dn = nx * dir.x + ny * dir.y + nz * dir.z;
-  return dn != 0.0 ? float((nx * ax + ny * ay + nz * az) / dn) : NAN;
+// The slab test for one ray: the entry distance or +inf on a miss. tfar is the current closest
+// hit (or ray tmax).
+[[gnu::always_inline]] inline float box_entry(const RayCtx& r, const Vec3& lo, const Vec3& hi, float tmin,
+                                              float tfar) {
+  const float xn[3] = {(r.near_x ? hi.x : lo.x) - r.org.x, (r.near_y ? hi.y : lo.y) - r.org.y,
+                       (r.near_z ? hi.z : lo.z) - r.org.z};
+  const float xf[3] = {(r.near_x ? lo.x : hi.x) - r.org.x, (r.near_y ? lo.y : hi.y) - r.org.y,
+                       (r.near_z ? lo.z : hi.z) - r.org.z};
+  const float rn[3] = {r.inv.x, r.inv.y, r.inv.z};
+  float tn;
+  return slab<1, false>(xn, xf, rn, rn, tmin, tfar, tn) ? tn : INFINITY;
 }
 
-// Watertight test. On a hit with tmin <= t < hit.t, updates hit (t, u, v) and returns true.
-inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
+// =============================================================================================
+// Watertight test (Woop, Benthin and Wald 2013), in three parts that every scheme composes the
+// same way: (1) the caller forms the sheared vertex coordinates X = P[kx] - sx * P[kz],
+// Y = P[ky] - sy * P[kz] of the vertices relative to the origin (shear<L>); (2) watertight_inside
+// computes the edge functions and decides inside/outside; (3) the hit distance of the few lanes
+// that pass comes from exact_plane_distance (double), the sheared distance only where the ray
+// lies in the plane (sheared_distance). u = V / det, v = W / det.
+
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::f shear(typename simd::V<L>::f p, typename simd::V<L>::f s,
+                                                           typename simd::V<L>::f pz) {
+  using S = simd::V<L>;
+  return S::sub(p, S::mul(s, pz));
+}
+
+// The sheared edge functions on L lanes; lanes where an edge passes (numerically) through the
+// ray are decided in double, so that the two triangles sharing the edge agree (Woop et al. 2013
+// §4): all three functions of such a lane are recomputed, as the scalar test always did.
+template <int L>
+[[gnu::always_inline]] inline void edge_functions(typename simd::V<L>::f Ax, typename simd::V<L>::f Ay,
+                                                  typename simd::V<L>::f Bx, typename simd::V<L>::f By,
+                                                  typename simd::V<L>::f Cx, typename simd::V<L>::f Cy,
+                                                  typename simd::V<L>::f& U, typename simd::V<L>::f& V,
+                                                  typename simd::V<L>::f& W) {
+  using S = simd::V<L>;
+  U = S::sub(S::mul(Cx, By), S::mul(Cy, Bx));
+  V = S::sub(S::mul(Ax, Cy), S::mul(Ay, Cx));
+  W = S::sub(S::mul(Bx, Ay), S::mul(By, Ax));
+  const typename S::f z = S::zero();
+  const auto zero = S::or_(S::or_(S::eq(U, z), S::eq(V, z)), S::eq(W, z));
+  if constexpr (L == 1) {
+    if (zero) [[unlikely]] {
+      U = float(double(Cx) * By - double(Cy) * Bx);
+      V = float(double(Ax) * Cy - double(Ay) * Cx);
+      W = float(double(Bx) * Ay - double(By) * Ax);
+    }
+  } else {
+    const int zmask = S::mask(zero);
+    if (zmask) [[unlikely]] {
+      alignas(32) float ax[L], ay[L], bx[L], by[L], cx[L], cy[L], u[L], v[L], w[L];
+      S::store(ax, Ax), S::store(ay, Ay), S::store(bx, Bx), S::store(by, By), S::store(cx, Cx), S::store(cy, Cy);
+      S::store(u, U), S::store(v, V), S::store(w, W);
+      for (int m = zmask; m; m &= m - 1) {
+        const int l = std::countr_zero(unsigned(m));
+        edge_functions<1>(ax[l], ay[l], bx[l], by[l], cx[l], cy[l], u[l], v[l], w[l]);
+      }
+      U = S::load(u), V = S::load(v), W = S::load(w);
+    }
+  }
+}
+
+// Parts (2): the lanes where the ray passes inside the triangle (all edge functions of one sign;
+// no NaN can occur: vertices and origin are finite) and the triangle is not degenerate or
+// edge-on (det == 0: never a hit). Also returns U, V, W and det = U + V + W.
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::m watertight_inside(
+    typename simd::V<L>::f Ax, typename simd::V<L>::f Ay, typename simd::V<L>::f Bx, typename simd::V<L>::f By,
+    typename simd::V<L>::f Cx, typename simd::V<L>::f Cy, typename simd::V<L>::f& U, typename simd::V<L>::f& V,
+    typename simd::V<L>::f& W, typename simd::V<L>::f& det) {
+  using S = simd::V<L>;
+  edge_functions<L>(Ax, Ay, Bx, By, Cx, Cy, U, V, W);
+  const typename S::f z = S::zero();
+  // (U < 0 || V < 0 || W < 0) && (U > 0 || V > 0 || W > 0), as min < 0 and max > 0.
+  const auto neg = S::lt(S::min(S::min(U, V), W), z);
+  const auto pos = S::gt(S::max(S::max(U, V), W), z);
+  det = S::add(S::add(U, V), W);
+  return S::andnot(S::and_(neg, pos), S::neq(det, z));
+}
+
+// The fallback distance of part (3), for a ray lying in the triangle's plane: sz * (U Az + V Bz +
+// W Cz) / det (Woop et al. 2013), with inv_det = 1 / det.
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::f sheared_distance(
+    typename simd::V<L>::f sz, typename simd::V<L>::f U, typename simd::V<L>::f V, typename simd::V<L>::f W,
+    typename simd::V<L>::f Az, typename simd::V<L>::f Bz, typename simd::V<L>::f Cz, typename simd::V<L>::f inv_det) {
+  using S = simd::V<L>;
+  return S::mul(S::mul(sz, S::add(S::add(S::mul(U, Az), S::mul(V, Bz)), S::mul(W, Cz))), inv_det);
+}
+
+// Part (3): the distance along the ray to the triangle's plane in double, for candidates that
+// already passed the inside test (one or two per ray), as num / dn; dn == 0 when the ray is
+// parallel to the plane. Why not T/det: the sheared distance loses up to ~1e-3 relative on long,
+// thin triangles (the edge functions cancel), and even the float plane equation loses
+// eps * |edge| / cos(angle) on grazing hits — both beyond the suite's 1e-5 accuracy bar on real
+// scenes (measured on lucy, conference). Differences of floats are exact in double, so this is
+// accurate to the last bit of the float result. D: double, or simd::D4v (four lanes); the
+// normal may be computed once per triangle (plane_normal) and reused over several rays.
+template <class D>
+struct Vec3D {
+  D x, y, z;
+};
+template <class D>
+[[gnu::always_inline]] inline Vec3D<D> plane_normal(const Vec3D<D>& v0, const Vec3D<D>& v1, const Vec3D<D>& v2) {
+  const D e1x = v1.x - v0.x, e1y = v1.y - v0.y, e1z = v1.z - v0.z;
+  const D e2x = v2.x - v0.x, e2y = v2.y - v0.y, e2z = v2.z - v0.z;
+  return {e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x};
+}
+template <class D>
+[[gnu::always_inline]] inline D plane_dot(const Vec3D<D>& n, const Vec3D<D>& a) {
+  return n.x * a.x + n.y * a.y + n.z * a.z;
+}
+// num = n . (v0 - org), dn = n . dir.
+template <class D>
+[[gnu::always_inline]] inline void plane_terms(const Vec3D<D>& n, const Vec3D<D>& v0, const Vec3D<D>& org,
+                                               const Vec3D<D>& dir, D& num, D& dn) {
+  num = plane_dot(n, Vec3D<D>{v0.x - org.x, v0.y - org.y, v0.z - org.z});
+  dn = plane_dot(n, dir);
+}
+inline Vec3D<double> to_double(const Vec3& v) { return {v.x, v.y, v.z}; }
+// One ray, one triangle: NaN when the ray is parallel to the plane.
+[[gnu::always_inline]] inline float exact_plane_distance(const Vec3& org, const Vec3& dir, const TriVerts& tri) {
+  const Vec3D<double> v0 = to_double(tri.v0);
+  double num, dn;
+  plane_terms(plane_normal(v0, to_double(tri.v1), to_double(tri.v2)), v0, to_double(org), to_double(dir), num, dn);
+  return dn != 0.0 ? float(num / dn) : NAN;
+}
+
+// The watertight test for one ray. On a hit with tmin <= t < hit.t, updates hit (t, u, v) and
+// returns true.
+[[gnu::always_inline]] inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
   const Vec3 A = tri.v0 - r.org, B = tri.v1 - r.org, C = tri.v2 - r.org;
-  const float Ax = A[r.kx] - r.sx * A[r.kz], Ay = A[r.ky] - r.sy * A[r.kz];
-  const float Bx = B[r.kx] - r.sx * B[r.kz], By = B[r.ky] - r.sy * B[r.kz];
-  const float Cx = C[r.kx] - r.sx * C[r.kz], Cy = C[r.ky] - r.sy * C[r.kz];
-  float U = Cx * By - Cy * Bx, V = Ax * Cy - Ay * Cx, W = Bx * Ay - By * Ax;
-  if (U == 0.f || V == 0.f || W == 0.f) [[unlikely]] {
-    // An edge passes (numerically) through the ray: decide in double so neighbours agree (§4).
-    U = float(double(Cx) * By - double(Cy) * Bx);
-    V = float(double(Ax) * Cy - double(Ay) * Cx);
-    W = float(double(Bx) * Ay - double(By) * Ax);
-  }
-  if ((U < 0.f || V < 0.f || W < 0.f) && (U > 0.f || V > 0.f || W > 0.f)) return false;
-  const float det = U + V + W;
-  if (det == 0.f) return false;  // degenerate or edge-on: never a hit
-  // See exact_plane_distance: the sheared T/det is only the fallback for edge-on triangles.
+  float U, V, W, det;
+  if (!watertight_inside<1>(shear<1>(A[r.kx], r.sx, A[r.kz]), shear<1>(A[r.ky], r.sy, A[r.kz]),
+                            shear<1>(B[r.kx], r.sx, B[r.kz]), shear<1>(B[r.ky], r.sy, B[r.kz]),
+                            shear<1>(C[r.kx], r.sx, C[r.kz]), shear<1>(C[r.ky], r.sy, C[r.kz]), U, V, W, det))
+    return false;
   const float inv_det = 1.f / det;
   float t = exact_plane_distance(r.org, r.dir, tri);
-  if (std::isnan(t)) t = r.sz * (U * A[r.kz] + V * B[r.kz] + W * C[r.kz]) * inv_det;
+  if (std::isnan(t)) t = sheared_distance<1>(r.sz, U, V, W, A[r.kz], B[r.kz], C[r.kz], inv_det);
   if (!(t >= tmin && t < hit.t)) return false;
   hit.t = t;
   hit.u = V * inv_det;
@@ -146,48 +244,103 @@ inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmi
   return true;
 }
 
-// Moller-Trumbore (1997): fast, not watertight (rays through shared edges can leak).
-inline bool intersect_moller(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
+// =============================================================================================
+// Moller-Trumbore (1997): fast, not watertight (rays through shared edges can leak). L rays
+// against one triangle: d = direction, s = origin - v0, per lane. Returns the lanes of `ok`
+// that hit with tmin <= t < tfar, and their t, u, v.
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::m moller(const typename simd::V<L>::f d[3],
+                                                            const typename simd::V<L>::f s[3], const TriVerts& tri,
+                                                            typename simd::V<L>::f tmin, typename simd::V<L>::f tfar,
+                                                            typename simd::V<L>::m ok, typename simd::V<L>::f& t,
+                                                            typename simd::V<L>::f& u, typename simd::V<L>::f& v) {
+  using S = simd::V<L>;
+  using f = typename S::f;
   const Vec3 e1 = tri.v1 - tri.v0, e2 = tri.v2 - tri.v0;
-  const Vec3 p = cross(r.dir, e2);
-  const float det = dot(e1, p);
-  if (std::fabs(det) < 1e-20f) return false;
-  const float inv_det = 1.f / det;
-  const Vec3 s = r.org - tri.v0;
-  const float u = dot(s, p) * inv_det;
-  if (u < 0.f || u > 1.f) return false;
-  const Vec3 q = cross(s, e1);
-  const float v = dot(r.dir, q) * inv_det;
-  if (v < 0.f || u + v > 1.f) return false;
-  const float t = dot(e2, q) * inv_det;
-  if (!(t >= tmin && t < hit.t)) return false;
-  hit.t = t; hit.u = u; hit.v = v;
+  const f e1x = S::set1(e1.x), e1y = S::set1(e1.y), e1z = S::set1(e1.z);
+  const f e2x = S::set1(e2.x), e2y = S::set1(e2.y), e2z = S::set1(e2.z);
+  const f zero = S::zero(), one = S::set1(1.f);
+  // p = cross(d, e2), det = dot(e1, p)
+  const f px = S::sub(S::mul(d[1], e2z), S::mul(d[2], e2y));
+  const f py = S::sub(S::mul(d[2], e2x), S::mul(d[0], e2z));
+  const f pz = S::sub(S::mul(d[0], e2y), S::mul(d[1], e2x));
+  const f det = S::add(S::add(S::mul(e1x, px), S::mul(e1y, py)), S::mul(e1z, pz));
+  ok = S::andnot(S::lt(S::abs(det), S::set1(1e-20f)), ok);
+  if (!S::any(ok)) return ok;
+  const f inv_det = S::div(one, det);
+  u = S::mul(S::add(S::add(S::mul(s[0], px), S::mul(s[1], py)), S::mul(s[2], pz)), inv_det);
+  ok = S::andnot(S::or_(S::lt(u, zero), S::gt(u, one)), ok);
+  if (!S::any(ok)) return ok;
+  // q = cross(s, e1)
+  const f qx = S::sub(S::mul(s[1], e1z), S::mul(s[2], e1y));
+  const f qy = S::sub(S::mul(s[2], e1x), S::mul(s[0], e1z));
+  const f qz = S::sub(S::mul(s[0], e1y), S::mul(s[1], e1x));
+  v = S::mul(S::add(S::add(S::mul(d[0], qx), S::mul(d[1], qy)), S::mul(d[2], qz)), inv_det);
+  ok = S::andnot(S::or_(S::lt(v, zero), S::gt(S::add(u, v), one)), ok);
+  if (!S::any(ok)) return ok;
+  t = S::mul(S::add(S::add(S::mul(e2x, qx), S::mul(e2y, qy)), S::mul(e2z, qz)), inv_det);
+  return S::and_(ok, S::and_(S::ge(t, tmin), S::lt(t, tfar)));
+}
+
+[[gnu::always_inline]] inline bool intersect_moller(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
+  const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
+  const Vec3 sv = r.org - tri.v0;
+  const float s[3] = {sv.x, sv.y, sv.z};
+  float t, u, v;
+  if (!moller<1>(d, s, tri, tmin, hit.t, true, t, u, v)) return false;
+  hit.t = t, hit.u = u, hit.v = v;
   return true;
 }
 
+// =============================================================================================
 // Precomputed-plane test (Appendix C): t from the plane, barycentrics from two edge planes
 // evaluated at the hit point. kApproxRcp uses rcpps (12 bits) for 1/(n.d) as the thesis does.
+// L rays against one triangle: o = origin, d = direction, on = dot(o, n) (plane_offset; a
+// common-origin packet computes it once); same result convention as moller.
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::f plane_offset(const typename simd::V<L>::f o[3], const Vec3& n) {
+  using S = simd::V<L>;
+  return S::add(S::add(S::mul(o[0], S::set1(n.x)), S::mul(o[1], S::set1(n.y))), S::mul(o[2], S::set1(n.z)));
+}
+template <int L, bool kApproxRcp>
+[[gnu::always_inline]] inline typename simd::V<L>::m plane(const typename simd::V<L>::f o[3],
+                                                           const typename simd::V<L>::f d[3], typename simd::V<L>::f on,
+                                                           const PlaneTri& tri, typename simd::V<L>::f tmin,
+                                                           typename simd::V<L>::f tfar, typename simd::V<L>::m ok,
+                                                           typename simd::V<L>::f& t, typename simd::V<L>::f& u,
+                                                           typename simd::V<L>::f& v) {
+  using S = simd::V<L>;
+  using f = typename S::f;
+  const f zero = S::zero(), one = S::set1(1.f);
+  const f dn = plane_offset<L>(d, tri.n);
+  ok = S::and_(ok, S::neq(dn, zero));
+  if (!S::any(ok)) return ok;
+  const f rcp = kApproxRcp ? S::rcp(dn) : S::div(one, dn);
+  t = S::mul(S::sub(S::set1(tri.nd), on), rcp);
+  ok = S::and_(ok, S::and_(S::ge(t, tmin), S::lt(t, tfar)));
+  if (!S::any(ok)) return ok;
+  const f p[3] = {S::add(o[0], S::mul(d[0], t)), S::add(o[1], S::mul(d[1], t)), S::add(o[2], S::mul(d[2], t))};
+  u = S::add(plane_offset<L>(p, tri.u), S::set1(tri.ud));
+  ok = S::andnot(S::or_(S::lt(u, zero), S::gt(u, one)), ok);
+  if (!S::any(ok)) return ok;
+  v = S::add(plane_offset<L>(p, tri.v), S::set1(tri.vd));
+  return S::andnot(S::or_(S::lt(v, zero), S::gt(S::add(u, v), one)), ok);
+}
+
 template <bool kApproxRcp>
-inline bool intersect_plane(const RayCtx& r, const PlaneTri& tri, float tmin, Hit& hit) {
-  const float dn = dot(r.dir, tri.n);
-  if (dn == 0.f) return false;
-  float rcp;
-  if constexpr (kApproxRcp) rcp = _mm_cvtss_f32(_mm_rcp_ss(_mm_set_ss(dn)));
-  else rcp = 1.f / dn;
-  const float t = (tri.nd - dot(r.org, tri.n)) * rcp;
-  if (!(t >= tmin && t < hit.t)) return false;
-  const Vec3 p = r.org + r.dir * t;
-  const float u = dot(p, tri.u) + tri.ud;
-  if (u < 0.f || u > 1.f) return false;
-  const float v = dot(p, tri.v) + tri.vd;
-  if (v < 0.f || u + v > 1.f) return false;
-  hit.t = t; hit.u = u; hit.v = v;
+[[gnu::always_inline]] inline bool intersect_plane(const RayCtx& r, const PlaneTri& tri, float tmin, Hit& hit) {
+  const float o[3] = {r.org.x, r.org.y, r.org.z}, d[3] = {r.dir.x, r.dir.y, r.dir.z};
+  float t, u, v;
+  if (!plane<1, kApproxRcp>(o, d, dot(r.org, tri.n), tri, tmin, hit.t, true, t, u, v)) return false;
+  hit.t = t, hit.u = u, hit.v = v;
   return true;
 }
 
+// =============================================================================================
 // Tests stored triangle i with kernel K; on a closer hit records it (prim = scene index).
 template <TriKernel K>
-inline bool intersect_tri(const RayCtx& r, const TriangleSet& ts, uint32_t i, float tmin, Hit& hit) {
+[[gnu::always_inline]] inline bool intersect_tri(const RayCtx& r, const TriangleSet& ts, uint32_t i, float tmin,
+                                                 Hit& hit) {
   bool h;
   if constexpr (K == TriKernel::watertight) h = intersect_watertight(r, ts.verts[i], tmin, hit);
   else if constexpr (K == TriKernel::moller) h = intersect_moller(r, ts.verts[i], tmin, hit);
@@ -205,19 +358,6 @@ decltype(auto) dispatch_kernel(TriKernel k, F&& f) {
     case TriKernel::plane: return f(std::integral_constant<TriKernel, TriKernel::plane>{});
     case TriKernel::plane_rcp: return f(std::integral_constant<TriKernel, TriKernel::plane_rcp>{});
     default: return f(std::integral_constant<TriKernel, TriKernel::watertight>{});
-  }
-}
-
-template <class SceneT>
-void TriangleSet::build(const SceneT& scene, const std::vector<uint32_t>& order, TriKernel k) {
-  verts.resize(order.size());
-  prim_id = order;
-  for (size_t i = 0; i < order.size(); ++i)
-    verts[i] = {scene.vertex(order[i], 0), scene.vertex(order[i], 1), scene.vertex(order[i], 2)};
-  planes.clear();
-  if (k == TriKernel::plane || k == TriKernel::plane_rcp) {
-    planes.resize(verts.size());
-    for (size_t i = 0; i < verts.size(); ++i) planes[i] = make_plane_tri(verts[i]);
   }
 }
 

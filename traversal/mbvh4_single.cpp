@@ -4,7 +4,7 @@
 // network of Alg. 2.10, a small stack of (child, entry distance) and culling of popped children
 // beyond the closest hit. Leaves hold SSE blocks of 4 triangles for the watertight test.
 // Dammertz et al. (2008) report 1.6-2.0x over the binary BVH for this layout.
-#include "structures/mbvh.h"
+#include "traversal/mbvh_traverse.h"
 
 namespace tb {
 namespace {

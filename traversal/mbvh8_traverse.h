@@ -14,7 +14,7 @@
 // (docs/PERFORMANCE.md). This is the "sort always" variant of the child ordering discussed by
 // Wald et al. (2008) and Ernst & Greiner (2008) for 4-wide nodes, with the keys of thesis Alg. 2.10.
 #pragma once
-#include "structures/mbvh.h"
+#include "traversal/mbvh_traverse.h"
 
 namespace tb {
 

@@ -22,7 +22,7 @@
 // AVX2 pass). On bounce:3 width=8 ran 1.2-1.35x the 4-wide streams (conference, sponza,
 // crytek_sponza_partial, dragon_100k), mostly from visiting far fewer nodes per ray; it is the
 // default. All scratch lives in the call, so concurrent calls on disjoint ranges are safe.
-#include "structures/mbvh.h"
+#include "traversal/mbvh_traverse.h"
 #include "traversal/bvh_common.h"
 #include "traversal/mbvh_stream.h"
 

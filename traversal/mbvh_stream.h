@@ -30,7 +30,7 @@
 #include <initializer_list>
 #include <vector>
 
-#include "structures/mbvh.h"
+#include "traversal/mbvh_traverse.h"
 
 namespace tb::mbvh_stream {
 
@@ -95,7 +95,7 @@ inline void prepare(const Rays& v, uint32_t n) {
 }
 
 // Two rays against one block of four triangles in one AVX2 pass: ray A in the low 128-bit half,
-// ray B in the high half, each half the watertight test of mbvh.h's block_intersect (Woop,
+// ray B in the high half, each half the kernel library's watertight test as in block_intersect (mbvh_traverse.h) (Woop,
 // Benthin and Wald 2013) with the same float operations in the same order per lane, so every
 // lane decides exactly as the 4-wide test would — watertightness carries over — at half the
 // instructions per ray. MBVH/RS leaf streams hold several rays (Table 10), so pairs are common.
@@ -111,60 +111,45 @@ inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32
 }
 
 inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) {
-  using S = mbvh_simd::V<8>;
+  using S = simd::V<8>;
   using f = __m256;
+  using D = simd::D4v;
   const f Az = S::sub(pair_rows(b, 0, r.kz[0], r.kz[1]), r.oz);
   const f Bz = S::sub(pair_rows(b, 1, r.kz[0], r.kz[1]), r.oz);
   const f Cz = S::sub(pair_rows(b, 2, r.kz[0], r.kz[1]), r.oz);
-  const f Ax = S::sub(S::sub(pair_rows(b, 0, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Az));
-  const f Ay = S::sub(S::sub(pair_rows(b, 0, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Az));
-  const f Bx = S::sub(S::sub(pair_rows(b, 1, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Bz));
-  const f By = S::sub(S::sub(pair_rows(b, 1, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Bz));
-  const f Cx = S::sub(S::sub(pair_rows(b, 2, r.kx[0], r.kx[1]), r.ox), S::mul(r.sx, Cz));
-  const f Cy = S::sub(S::sub(pair_rows(b, 2, r.ky[0], r.ky[1]), r.oy), S::mul(r.sy, Cz));
-  f U, Vv, Ww;
-  edge_functions<S>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww);  // incl. the double fallback on edges
-  const f z = S::zero();
-  const f neg = S::lt(S::min(S::min(U, Vv), Ww), z);
-  const f pos = S::gt(S::max(S::max(U, Vv), Ww), z);
-  const f det = S::add(S::add(U, Vv), Ww);
-  int m = S::mask(S::andnot(S::and_(neg, pos), S::neq(det, z)));  // det == 0: never a hit
+  const f Ax = shear<8>(S::sub(pair_rows(b, 0, r.kx[0], r.kx[1]), r.ox), r.sx, Az);
+  const f Ay = shear<8>(S::sub(pair_rows(b, 0, r.ky[0], r.ky[1]), r.oy), r.sy, Az);
+  const f Bx = shear<8>(S::sub(pair_rows(b, 1, r.kx[0], r.kx[1]), r.ox), r.sx, Bz);
+  const f By = shear<8>(S::sub(pair_rows(b, 1, r.ky[0], r.ky[1]), r.oy), r.sy, Bz);
+  const f Cx = shear<8>(S::sub(pair_rows(b, 2, r.kx[0], r.kx[1]), r.ox), r.sx, Cz);
+  const f Cy = shear<8>(S::sub(pair_rows(b, 2, r.ky[0], r.ky[1]), r.oy), r.sy, Cz);
+  f U, Vv, Ww, det;
+  int m = S::mask(watertight_inside<8>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return;
-  // Candidates: the distance from the triangle's plane in double, as intersect_watertight
-  // (exact_plane_distance: the same double operations in the same order), four lanes of a ray at
-  // once — a ray's line passes through several triangles of a leaf, most of them out of range.
+  // Candidates: exact_plane_distance's double plane equation, four lanes (the block's four
+  // triangles) of a ray at once — a ray's line passes through several triangles of a leaf, most
+  // of them out of range. The normals depend on the block only.
   alignas(32) float us[8], vs[8], ws[8], dets[8], ts[8];
   S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
+  const Vec3D<D> v0{D(_mm_load_ps(b.v[0][0])), D(_mm_load_ps(b.v[0][1])), D(_mm_load_ps(b.v[0][2]))};
+  const Vec3D<D> n = plane_normal(v0, Vec3D<D>{D(_mm_load_ps(b.v[1][0])), D(_mm_load_ps(b.v[1][1])), D(_mm_load_ps(b.v[1][2]))},
+                                  Vec3D<D>{D(_mm_load_ps(b.v[2][0])), D(_mm_load_ps(b.v[2][1])), D(_mm_load_ps(b.v[2][2]))});
   for (int ray = 0; ray < 2; ++ray) {
-    if (!((m >> (4 * ray)) & 15)) continue;
+    const int rm = (m >> (4 * ray)) & 15;
+    if (!rm) continue;
     const uint32_t id = r.id[ray];
-    const Vec3 o{r.v->ox[id], r.v->oy[id], r.v->oz[id]}, d{r.v->dx[id], r.v->dy[id], r.v->dz[id]};
-    const __m256d v0x = _mm256_cvtps_pd(_mm_load_ps(b.v[0][0])), v0y = _mm256_cvtps_pd(_mm_load_ps(b.v[0][1])),
-                  v0z = _mm256_cvtps_pd(_mm_load_ps(b.v[0][2]));
-    const __m256d ax = _mm256_sub_pd(v0x, _mm256_set1_pd(o.x)), ay = _mm256_sub_pd(v0y, _mm256_set1_pd(o.y)),
-                  az = _mm256_sub_pd(v0z, _mm256_set1_pd(o.z));
-    const __m256d e1x = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][0])), v0x);
-    const __m256d e1y = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][1])), v0y);
-    const __m256d e1z = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[1][2])), v0z);
-    const __m256d e2x = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][0])), v0x);
-    const __m256d e2y = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][1])), v0y);
-    const __m256d e2z = _mm256_sub_pd(_mm256_cvtps_pd(_mm_load_ps(b.v[2][2])), v0z);
-    const __m256d nx = _mm256_sub_pd(_mm256_mul_pd(e1y, e2z), _mm256_mul_pd(e1z, e2y));
-    const __m256d ny = _mm256_sub_pd(_mm256_mul_pd(e1z, e2x), _mm256_mul_pd(e1x, e2z));
-    const __m256d nz = _mm256_sub_pd(_mm256_mul_pd(e1x, e2y), _mm256_mul_pd(e1y, e2x));
-    const __m256d dn = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, _mm256_set1_pd(d.x)), _mm256_mul_pd(ny, _mm256_set1_pd(d.y))),
-                                     _mm256_mul_pd(nz, _mm256_set1_pd(d.z)));
-    const __m256d num = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(nx, ax), _mm256_mul_pd(ny, ay)), _mm256_mul_pd(nz, az));
-    _mm_store_ps(ts + 4 * ray, _mm256_cvtpd_ps(_mm256_div_pd(num, dn)));
-    if (_mm256_movemask_pd(_mm256_cmp_pd(dn, _mm256_setzero_pd(), _CMP_EQ_OQ)) & (m >> (4 * ray)) & 15) [[unlikely]] {
+    D num, dn;
+    plane_terms(n, v0, Vec3D<D>{D(double(r.v->ox[id])), D(double(r.v->oy[id])), D(double(r.v->oz[id]))},
+                Vec3D<D>{D(double(r.v->dx[id])), D(double(r.v->dy[id])), D(double(r.v->dz[id]))}, num, dn);
+    _mm_store_ps(ts + 4 * ray, (num / dn).to_float());
+    if (const int par = dn.zero_mask() & rm) [[unlikely]] {
       // Edge-on (the ray lies in the plane): the sheared distance, as intersect_watertight.
       alignas(32) float azs[8], bzs[8], czs[8];
       S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
-      alignas(32) double dns[4];
-      _mm256_store_pd(dns, dn);
       for (int t4 = 0; t4 < 4; ++t4) {
         const int l = 4 * ray + t4;
-        if (dns[t4] == 0.0) ts[l] = r.v->sz[r.id[ray]] * (us[l] * azs[l] + vs[l] * bzs[l] + ws[l] * czs[l]) * (1.f / dets[l]);
+        if (par >> t4 & 1)
+          ts[l] = sheared_distance<1>(r.v->sz[id], us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], 1.f / dets[l]);
       }
     }
   }
@@ -303,7 +288,7 @@ inline void single(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const
 template <int N, TriKernel K, class P>
 void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v, uint32_t n, uint32_t root,
            P& probe) {
-  using SN = mbvh_simd::V<N>;
+  using SN = simd::V<N>;
   using f = typename SN::f;
   const MBVHNode<N>* nodes = m.nodes.data();
   const TriBlock<4>* blocks = m.blocks.data();
@@ -358,8 +343,8 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       }
       continue;
     }
-    // Interior node: every ray of the task against the N child boxes (box_test of mbvh.h:
-    // sign-selected slabs, NaN slabs ignored by operand order, Ize-padded far planes).
+    // Interior node: every ray of the task against the N child boxes (the kernel library's slab
+    // test, as box_test of mbvh_traverse.h, on the stream's SoA ray record).
     const MBVHNode<N>& nd = nodes[t.ref];
     probe.node(&nd, sizeof(nd), t.count);
     const float* b = &nd.box[0][0];
@@ -374,15 +359,14 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       const uint32_t oct = v.meta[id];
       const uint32_t nx = (oct & 1) * 3 * N, ny = (oct >> 1 & 1) * 3 * N, nz = (oct >> 2 & 1) * 3 * N;
       const f ox = SN::set1(v.ox[id]), oy = SN::set1(v.oy[id]), oz = SN::set1(v.oz[id]);
-      const f tnx = SN::mul(SN::sub(SN::load(b + nx), ox), SN::set1(v.ix[id]));
-      const f tny = SN::mul(SN::sub(SN::load(b + N + ny), oy), SN::set1(v.iy[id]));
-      const f tnz = SN::mul(SN::sub(SN::load(b + 2 * N + nz), oz), SN::set1(v.iz[id]));
-      const f tfx = SN::mul(SN::sub(SN::load(b + 3 * N - nx), ox), SN::set1(v.fx[id]));
-      const f tfy = SN::mul(SN::sub(SN::load(b + 4 * N - ny), oy), SN::set1(v.fy[id]));
-      const f tfz = SN::mul(SN::sub(SN::load(b + 5 * N - nz), oz), SN::set1(v.fz[id]));
-      const f tn = SN::max(tnz, SN::max(tny, SN::max(tnx, SN::set1(v.tmin[id]))));
-      const f tf = SN::min(tfz, SN::min(tfy, SN::min(tfx, SN::set1(v.hits[id].t))));
-      const f enter = SN::le(tn, tf);
+      const f xn[3] = {SN::sub(SN::load(b + nx), ox), SN::sub(SN::load(b + N + ny), oy),
+                       SN::sub(SN::load(b + 2 * N + nz), oz)};
+      const f xf[3] = {SN::sub(SN::load(b + 3 * N - nx), ox), SN::sub(SN::load(b + 4 * N - ny), oy),
+                       SN::sub(SN::load(b + 5 * N - nz), oz)};
+      const f rn[3] = {SN::set1(v.ix[id]), SN::set1(v.iy[id]), SN::set1(v.iz[id])};
+      const f rf[3] = {SN::set1(v.fx[id]), SN::set1(v.fy[id]), SN::set1(v.fz[id])};
+      f tn;
+      const f enter = slab<N, true>(xn, xf, rn, rf, SN::set1(v.tmin[id]), SN::set1(v.hits[id].t), tn);
       dsum = SN::add(dsum, SN::and_(tn, enter));
       const unsigned mk = unsigned(SN::mask(enter));
       masks[i] = uint8_t(mk);

@@ -96,19 +96,17 @@ struct WalkRay {
   float tmin, tbest;
 };
 
-// box_entry of kernels.h for a WalkRay: the same operations with the same NaN semantics (a slab
-// whose plane holds the origin of an axis-parallel ray constrains nothing) and Ize's padding.
+// box_entry of kernels.h for a WalkRay: the kernel library's slab test (same NaN semantics: a slab
+// whose plane holds the origin of an axis-parallel ray constrains nothing; Ize's padding).
 inline float walk_entry(const WalkRay& w, const AABB& b) {
   const bool sx = std::signbit(w.inv.x), sy = std::signbit(w.inv.y), sz = std::signbit(w.inv.z);
-  const float nx = ((sx ? b.hi.x : b.lo.x) - w.org.x) * w.inv.x;
-  const float fx = ((sx ? b.lo.x : b.hi.x) - w.org.x) * w.inv.x;
-  const float ny = ((sy ? b.hi.y : b.lo.y) - w.org.y) * w.inv.y;
-  const float fy = ((sy ? b.lo.y : b.hi.y) - w.org.y) * w.inv.y;
-  const float nz = ((sz ? b.hi.z : b.lo.z) - w.org.z) * w.inv.z;
-  const float fz = ((sz ? b.lo.z : b.hi.z) - w.org.z) * w.inv.z;
-  const float tn = std::max(std::max(std::max(w.tmin, nx), ny), nz);
-  const float tf = std::min(std::min(std::min(w.tbest, fx * kFarPad), fy * kFarPad), fz * kFarPad);
-  return tn <= tf ? tn : INFINITY;
+  const float xn[3] = {(sx ? b.hi.x : b.lo.x) - w.org.x, (sy ? b.hi.y : b.lo.y) - w.org.y,
+                       (sz ? b.hi.z : b.lo.z) - w.org.z};
+  const float xf[3] = {(sx ? b.lo.x : b.hi.x) - w.org.x, (sy ? b.lo.y : b.hi.y) - w.org.y,
+                       (sz ? b.lo.z : b.hi.z) - w.org.z};
+  const float rn[3] = {w.inv.x, w.inv.y, w.inv.z};
+  float tn;
+  return slab<1, false>(xn, xf, rn, rn, w.tmin, w.tbest, tn) ? tn : INFINITY;
 }
 
 // The queue being processed: the shared stream record (traversal/mbvh_stream.h) over the queue's

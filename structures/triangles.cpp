@@ -1,4 +1,4 @@
-#include "traversal/kernels.h"
+#include "structures/triangles.h"
 
 #include "structures/scene.h"
 

@@ -1,0 +1,398 @@
+// What reads the MBVH layout of structures/mbvh.h (thesis §2.2 "MBVH traversal"): the per-ray
+// constants of the N-wide node test and the W-wide triangle-block test, the node test, the
+// triangle-block test, the ordered single-ray traversal (mbvh_traverse) and the timed per-ray loop
+// of mbvh4_single / mbvh8_single. mbvh_rs's one-ray fallback (thesis §2.2 / Tsakok 2009) and the
+// RayGrid's mini-MBVHs use the same loop.
+//
+// The arithmetic is the kernel library's (traversal/kernels.h): the node test is slab<N> (sign-
+// selected slabs, NaN slabs ignored, Ize far padding), the block test is the watertight test of
+// Woop, Benthin and Wald (2013) on W lanes — the same float operations in the same order as the
+// one-ray test, so shared edges give exactly negated edge functions (-ffp-contract=off).
+#pragma once
+#include <immintrin.h>
+
+#include <algorithm>
+#include <bit>
+#include <cstdint>
+#include <span>
+#include <type_traits>
+#include <vector>
+
+#include "structures/mbvh.h"
+#include "traversal/bvh_common.h"
+#include "traversal/kernels.h"
+#include "traversal/probe.h"
+#include "traversal/simd.h"
+#include "traversal/traverser.h"
+
+namespace tb {
+
+namespace mbvh_simd {
+
+using simd::V;
+
+// Sort keys of child distances: the distance's bit pattern with the child index in the low
+// bits (thesis Alg. 2.10), misses as the largest key. Integer min/max instead of the thesis'
+// minps/maxps: under DAZ (set in every tracing thread) a distance of 0 with index bits is a
+// denormal that compares equal to its neighbour, and minps/maxps of equal operands both return
+// the second one — the network would duplicate one child and lose another. Distances are >= 0
+// (tn >= tmin >= 0), where signed-integer order is float order, so the result is the same order.
+inline __m128i sort_keys4(__m128 dist, __m128 hit) {
+  const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
+  __m128i k = _mm_castps_si128(_mm_blendv_ps(_mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF)), dist, hit));
+  return _mm_or_si128(_mm_and_si128(k, _mm_set1_epi32(~3)), lane);
+}
+// Thesis Alg. 2.10 (after Furtak et al. 2007): a branch-free 4-element sorting network in one
+// register, comparators (0,1)(2,3), (0,2)(1,3), (1,2).
+inline __m128i sort4(__m128i k) {
+  __m128i p = _mm_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1));
+  k = _mm_blend_epi32(_mm_min_epi32(k, p), _mm_max_epi32(k, p), 0b1010);
+  p = _mm_shuffle_epi32(k, _MM_SHUFFLE(1, 0, 3, 2));
+  k = _mm_blend_epi32(_mm_min_epi32(k, p), _mm_max_epi32(k, p), 0b1100);
+  p = _mm_shuffle_epi32(k, _MM_SHUFFLE(3, 1, 2, 0));
+  return _mm_blend_epi32(_mm_min_epi32(k, p), _mm_max_epi32(k, p), 0b0100);
+}
+inline __m256i sort_keys8(__m256 dist, __m256 hit) {
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  __m256i k = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF)), dist, hit));
+  return _mm256_or_si256(_mm256_and_si256(k, _mm256_set1_epi32(~7)), lane);
+}
+// The 8-wide equivalent: Batcher's bitonic network, 6 stages of (partner shuffle, min, max, blend).
+inline __m256i sort8(__m256i k) {
+  auto stage = [](__m256i k, __m256i p, auto imm) {
+    return _mm256_blend_epi32(_mm256_min_epi32(k, p), _mm256_max_epi32(k, p), decltype(imm)::value);
+  };
+  using std::integral_constant;
+  k = stage(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)), integral_constant<int, 0x66>{});
+  k = stage(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(1, 0, 3, 2)), integral_constant<int, 0x3C>{});
+  k = stage(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)), integral_constant<int, 0x5A>{});
+  k = stage(k, _mm256_permute2x128_si256(k, k, 0x01), integral_constant<int, 0xF0>{});
+  k = stage(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(1, 0, 3, 2)), integral_constant<int, 0xCC>{});
+  return stage(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)), integral_constant<int, 0xAA>{});
+}
+
+}  // namespace mbvh_simd
+
+// Per-ray constants of the N-wide box test: origin, reciprocal direction, the reciprocal padded
+// for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
+// reciprocal, pad, multiply — is the same as box_entry's, so the same bound holds), and the rows
+// of the near and far planes per axis (sign-selected slabs, Williams et al. 2005).
+template <int N>
+struct NodeRay {
+  using f = typename simd::V<N>::f;
+  f ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin;
+  uint32_t near[3], far[3];  // float offsets into MBVHNode::box
+  NodeRay(const RayCtx& rc, float t0) { init(rc.org, rc.inv, t0); }
+  NodeRay(Vec3 org, Vec3 inv, float t0) { init(org, inv, t0); }
+  void init(Vec3 org, Vec3 inv, float t0) {
+    using S = simd::V<N>;
+    ox = S::set1(org.x), oy = S::set1(org.y), oz = S::set1(org.z);
+    ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
+    fx = S::set1(inv.x * kFarPad), fy = S::set1(inv.y * kFarPad), fz = S::set1(inv.z * kFarPad);
+    tmin = S::set1(t0);
+    for (int a = 0; a < 3; ++a) {
+      const bool neg = std::signbit(inv[a]);
+      near[a] = uint32_t(((neg ? 3 : 0) + a) * N);
+      far[a] = uint32_t(((neg ? 0 : 3) + a) * N);
+    }
+  }
+};
+
+// Entry distances `tn` of the N children and the lanes the ray enters before `tfar` (all-ones
+// lanes; movemask gives the bits): the kernel library's slab test on N lanes, one lane per child,
+// with the far reciprocal padded per ray (kPadRcp).
+template <int N>
+[[gnu::always_inline]] inline typename simd::V<N>::f box_test(const MBVHNode<N>& nd, const NodeRay<N>& r, float tfar,
+                                                              typename simd::V<N>::f& tn_out) {
+  using S = simd::V<N>;
+  const float* b = &nd.box[0][0];
+  const typename S::f xn[3] = {S::sub(S::load(b + r.near[0]), r.ox), S::sub(S::load(b + r.near[1]), r.oy),
+                               S::sub(S::load(b + r.near[2]), r.oz)};
+  const typename S::f xf[3] = {S::sub(S::load(b + r.far[0]), r.ox), S::sub(S::load(b + r.far[1]), r.oy),
+                               S::sub(S::load(b + r.far[2]), r.oz)};
+  const typename S::f rn[3] = {r.ix, r.iy, r.iz}, rf[3] = {r.fx, r.fy, r.fz};
+  return slab<N, true>(xn, xf, rn, rf, r.tmin, S::set1(tfar), tn_out);
+}
+
+// Per-ray constants of the W-wide watertight test: RayCtx's shear, broadcast.
+template <int W>
+struct TriRay {
+  using f = typename simd::V<W>::f;
+  struct NoHalf {};
+  f ox, oy, oz;  // origin, permuted (kx, ky, kz)
+  f sx, sy, sz;
+  Vec3 org, dir;
+  float tmin, szs;
+  uint32_t kx, ky, kz;
+  // 8 wide: the 4-wide constants for the small leaves.
+  [[no_unique_address]] std::conditional_t<W == 8, TriRay<4>, NoHalf> half;
+  TriRay() = default;
+  TriRay(const RayCtx& rc, float t0) : TriRay(rc.org, rc.dir, rc.kx, rc.ky, rc.kz, rc.sx, rc.sy, rc.sz, t0) {}
+  TriRay(Vec3 o, Vec3 d, int kx_, int ky_, int kz_, float sx_, float sy_, float sz_, float t0) {
+    using S = simd::V<W>;
+    kx = uint32_t(kx_), ky = uint32_t(ky_), kz = uint32_t(kz_);
+    ox = S::set1(o[kx_]), oy = S::set1(o[ky_]), oz = S::set1(o[kz_]);
+    sx = S::set1(sx_), sy = S::set1(sy_), sz = S::set1(sz_);
+    org = o, dir = d, tmin = t0, szs = sz_;
+    if constexpr (W == 8) half = TriRay<4>(o, d, kx_, ky_, kz_, sx_, sy_, sz_, t0);
+  }
+};
+
+// The watertight test of the kernel library on W triangles at once (one ray, W lanes): the same
+// float operations in the same order per lane as intersect_watertight, so its watertightness
+// carries over. On a hit with tmin <= t < hit.t records the closest (the first lane on ties, as a
+// scalar loop would) and returns true.
+template <int W>
+[[gnu::noinline]] inline bool block_intersect(const TriRay<W>& r, const TriBlock<W>& b, Hit& hit) {
+  using S = simd::V<W>;
+  using f = typename S::f;
+  const f Az = S::sub(S::load(b.v[0][r.kz]), r.oz);
+  const f Bz = S::sub(S::load(b.v[1][r.kz]), r.oz);
+  const f Cz = S::sub(S::load(b.v[2][r.kz]), r.oz);
+  const f Ax = shear<W>(S::sub(S::load(b.v[0][r.kx]), r.ox), r.sx, Az);
+  const f Ay = shear<W>(S::sub(S::load(b.v[0][r.ky]), r.oy), r.sy, Az);
+  const f Bx = shear<W>(S::sub(S::load(b.v[1][r.kx]), r.ox), r.sx, Bz);
+  const f By = shear<W>(S::sub(S::load(b.v[1][r.ky]), r.oy), r.sy, Bz);
+  const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), r.ox), r.sx, Cz);
+  const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), r.oy), r.sy, Cz);
+  f U, Vv, Ww, det;
+  int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
+  if (!m) return false;
+  // The candidates (usually none or one per block): exact_plane_distance, the sheared distance
+  // only for a ray in the triangle's plane.
+  alignas(32) float us[W], vs[W], ws[W], dets[W];
+  S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
+  bool found = false;
+  for (; m; m &= m - 1) {
+    const int l = std::countr_zero(unsigned(m));
+    const TriVerts tri{{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]},
+                       {b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
+                       {b.v[2][0][l], b.v[2][1][l], b.v[2][2][l]}};
+    const float inv_det = 1.f / dets[l];
+    float t = exact_plane_distance(r.org, r.dir, tri);
+    if (std::isnan(t)) [[unlikely]] {
+      alignas(32) float azs[W], bzs[W], czs[W];
+      S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
+      t = sheared_distance<1>(r.szs, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det);
+    }
+    if (!(t >= r.tmin && t < hit.t)) continue;
+    hit.t = t;
+    hit.u = vs[l] * inv_det;
+    hit.v = ws[l] * inv_det;
+    hit.prim = b.prim[l];
+    found = true;
+  }
+  return found;
+}
+
+// Tests the triangles of leaf `ref` in an array of W-wide blocks for one ray (a layout without
+// small leaves: MBVH<4, 4>, RayGrid's mini-MBVHs). The watertight kernel runs on the SIMD blocks;
+// the scalar kernels (moller, plane, plane_rcp) run kernels.h's tests lane by lane on `ts`.
+template <int W, TriKernel K>
+inline void leaf_test(const TriBlock<W>* blocks, const TriangleSet* ts, const TriRay<W>& tr, const RayCtx* rc,
+                      uint32_t ref, Hit& hit) {
+  const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
+  for (uint32_t k = 0; k * W < ntris; ++k) {
+    if constexpr (K == TriKernel::watertight) {
+      block_intersect<W>(tr, blocks[first + k], hit);
+    } else {
+      const uint32_t lanes = std::min<uint32_t>(W, ntris - k * W);
+      for (uint32_t l = 0; l < lanes; ++l) intersect_tri<K>(*rc, *ts, (first + k) * W + l, tr.tmin, hit);
+    }
+  }
+}
+// What a visit of leaf `ref` by `active` rays reads. A leaf has no record of its own (it lives
+// in its parent's slot), so the visit itself reads nothing; each block is one read, tested
+// against `active` rays (tests count real triangles, not padding lanes).
+template <int W, class P>
+inline void probe_leaf(const TriBlock<W>* blocks, uint32_t ref, P& probe, uint32_t active) {
+  if constexpr (P::enabled) {
+    const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
+    probe.leaf(&blocks[first], 0, active);
+    for (uint32_t k = 0; k * W < ntris; ++k)
+      probe.tris(&blocks[first + k], sizeof(TriBlock<W>), std::min<uint32_t>(W, ntris - k * W) * active);
+  }
+}
+// The same on an MBVH, whose small leaves (8-wide layout, <= 4 triangles) sit in 4-wide blocks.
+template <int N, int W, TriKernel K>
+inline void leaf_test(const MBVH<N, W>& m, const TriangleSet* ts, const TriRay<W>& tr, const RayCtx* rc, uint32_t ref,
+                      Hit& hit) {
+  const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
+  if constexpr (W == 8) {
+    if (ntris <= m.small_leaf) {
+      if constexpr (K == TriKernel::watertight) {
+        block_intersect<4>(tr.half, m.small[first], hit);
+      } else {
+        for (uint32_t l = 0; l < ntris; ++l) intersect_tri<K>(*rc, *ts, m.small_lane(first, l), tr.tmin, hit);
+      }
+      return;
+    }
+  }
+  leaf_test<W, K>(m.blocks.data(), ts, tr, rc, ref, hit);
+}
+template <int N, int W, class P>
+inline void probe_leaf(const MBVH<N, W>& m, uint32_t ref, P& probe, uint32_t active) {
+  if constexpr (P::enabled) {
+    const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
+    if (ntris <= m.small_leaf) {
+      probe.leaf(&m.small[first], 0, active);
+      probe.tris(&m.small[first], sizeof(TriBlock<4>), ntris * active);
+      return;
+    }
+    probe_leaf<W>(m.blocks.data(), ref, probe, active);
+  }
+}
+
+// Starts fetching a node that goes onto the stack: single-ray traversal is bound by the latency
+// of one dependent node fetch after another, and a pushed child is usually visited (it was
+// entered before the closest hit known so far).
+template <int N, int W>
+inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
+  if (mbvh_ref::is_leaf(ref)) return;
+  const char* p = reinterpret_cast<const char*>(&m.nodes[ref]);
+  for (size_t l = 0; l < sizeof(MBVHNode<N>); l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
+}
+
+struct MBVHStackEntry {
+  uint32_t ref;
+  float dist;  // entry distance: popped entries at or beyond the closest hit are skipped
+};
+
+// Pops the nearest pending child that may still hold a closer hit than `tfar` into `cur`
+// (entries beyond it are dropped); false when the stack runs empty.
+template <class P>
+inline bool pop_pending(const MBVHStackEntry* stack, uint32_t& sp, float tfar, uint32_t& cur, P& probe) {
+  for (;;) {
+    if (sp == 0) return false;
+    --sp;
+    probe.read(&stack[sp], sizeof(MBVHStackEntry));
+    if (stack[sp].dist < tfar) break;
+  }
+  cur = stack[sp].ref;
+  return true;
+}
+
+
+// Sorts the `count` (>= 3) entered children near-to-far and writes all but the nearest to
+// out[0 .. count-2], farthest first (so the second nearest ends on top); returns the nearest.
+// Writes N entries (see mbvh_traverse for why the stack always has room for them).
+template <int N>
+inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, typename simd::V<N>::f entered,
+                            int count, MBVHStackEntry* out) {
+  if constexpr (N == 4) {
+    const __m128i keys = mbvh_simd::sort4(mbvh_simd::sort_keys4(tn, entered));
+    // Position j takes sorted entry count-1-j.
+    const __m128i rev = _mm_sub_epi32(_mm_set1_epi32(count - 1), _mm_setr_epi32(0, 1, 2, 3));
+    const __m128i idx = _mm_and_si128(
+        _mm_castps_si128(_mm_permutevar_ps(_mm_castsi128_ps(keys), _mm_and_si128(rev, _mm_set1_epi32(3)))),
+        _mm_set1_epi32(3));
+    const __m128i refs = _mm_castps_si128(
+        _mm_permutevar_ps(_mm_castsi128_ps(_mm_load_si128(reinterpret_cast<const __m128i*>(nd.ref))), idx));
+    const __m128i dist = _mm_castps_si128(_mm_permutevar_ps(tn, idx));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_unpacklo_epi32(refs, dist));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out) + 1, _mm_unpackhi_epi32(refs, dist));
+    return nd.ref[uint32_t(_mm_cvtsi128_si32(keys)) & 3];
+  } else {
+    const __m256i keys = mbvh_simd::sort8(mbvh_simd::sort_keys8(tn, entered));
+    const __m256i rev = _mm256_sub_epi32(_mm256_set1_epi32(count - 1), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    const __m256i idx = _mm256_and_si256(_mm256_permutevar8x32_epi32(keys, rev), _mm256_set1_epi32(7));
+    const __m256i refs =
+        _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)), idx);
+    const __m256i dist = _mm256_permutevar8x32_epi32(_mm256_castps_si256(tn), idx);
+    const __m256i lo = _mm256_unpacklo_epi32(refs, dist), hi = _mm256_unpackhi_epi32(refs, dist);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permute2x128_si256(lo, hi, 0x20));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out) + 1, _mm256_permute2x128_si256(lo, hi, 0x31));
+    return nd.ref[uint32_t(_mm256_cvtsi256_si32(keys)) & 7];
+  }
+}
+
+// Ordered single-ray traversal (thesis Alg. 2.8 with front-to-back order): the N children are
+// tested at once; one hit child is entered directly, two are compared, three or more are sorted
+// with the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8); the nearest is entered
+// and the others are pushed far-to-near with their entry distances. Starts at `start` (the root,
+// or a subtree when mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries
+// (at depth d at most (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
+template <int N, int W, TriKernel K, class P>
+inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
+                          const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
+  using S = simd::V<N>;
+  const MBVHNode<N>* nodes = m.nodes.data();
+  uint32_t sp = 0, cur = start;
+  float tfar = hit.t;  // a register copy: stack stores could alias hit.t and force reloads
+  for (;;) {
+    if (!mbvh_ref::is_leaf(cur)) {
+      const MBVHNode<N>& nd = nodes[cur];
+      probe.node(&nd, sizeof(nd));
+      typename S::f tn;
+      const auto entered = box_test<N>(nd, nr, tfar, tn);
+      int mask = S::mask(entered);
+      if (mask) {
+        uint32_t c0 = uint32_t(std::countr_zero(unsigned(mask)));
+        const int rest = mask & (mask - 1);
+        if (!rest) {
+          cur = nd.ref[c0];
+          continue;
+        }
+        if (!(rest & (rest - 1))) {
+          uint32_t c1 = uint32_t(std::countr_zero(unsigned(rest)));
+          float d0 = S::lane(tn, c0), d1 = S::lane(tn, c1);
+          if (d1 < d0) std::swap(c0, c1), std::swap(d0, d1);
+          prefetch_ref(m, nd.ref[c1]);
+          stack[sp] = {nd.ref[c1], d1};
+          probe.write(&stack[sp], sizeof(MBVHStackEntry));
+          ++sp;
+          cur = nd.ref[c0];
+          continue;
+        }
+        // Three or more: sort branch-free (keys carry the child index in their low bits) and
+        // push the entries far-to-near with whole-vector stores; enter the nearest.
+        const int count = std::popcount(unsigned(mask));
+        cur = push_sorted<N>(nd, tn, entered, count, stack + sp);
+        if constexpr (P::enabled) {
+          for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
+        }
+        sp += uint32_t(count - 1);
+        continue;
+      }
+    } else {
+      probe_leaf(m, cur, probe, 1);
+      leaf_test<N, W, K>(m, ts, tr, rc, cur, hit);
+      tfar = hit.t;
+    }
+    if (!pop_pending(stack, sp, tfar, cur, probe)) return;
+  }
+}
+
+// The per-ray loop of the single-ray MBVH schemes: sets up each ray of `range` and hands it to
+// `traverse(nr, tr, rc, hit, stack)`.
+template <int N, int W, class P, class F>
+void mbvh_for_each_ray(const MBVH<N, W>& m, const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe,
+                       F&& traverse) {
+  std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
+  for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
+    const Ray& ray = batch.rays[i];
+    probe.read(&ray, sizeof(Ray));
+    if constexpr (P::enabled)
+      if (probe.counts) probe.counts->rays++;
+    const RayCtx rc(ray);
+    const NodeRay<N> nr(rc, ray.tmin);
+    const TriRay<W> tr(rc, ray.tmin);
+    Hit hit = initial_hit(ray);
+    traverse(nr, tr, rc, hit, stack.data());
+    hits[i] = finish_hit(hit);
+    probe.write(&hits[i], sizeof(Hit));
+  }
+}
+
+// Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
+template <int N, int W, TriKernel K, class P>
+void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
+                     P& probe) {
+  const MBVH<N, W>& m = *d.mbvh;
+  mbvh_for_each_ray(m, batch, range, hits, probe,
+                    [&](const NodeRay<N>& nr, const TriRay<W>& tr, const RayCtx& rc, Hit& hit, MBVHStackEntry* stack) {
+                      mbvh_traverse<N, W, K>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
+                    });
+}
+
+}  // namespace tb
