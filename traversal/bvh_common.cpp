@@ -2,12 +2,15 @@
 
 namespace tb {
 
-BVHBuildParams bvh_params(const SchemeConfig& cfg, int default_leaf) {
+ParamSpecs bvh_param_specs(int default_leaf) {
+  return {int_param("bins", BVHBuildParams{}.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
+          int_param("leaf_size", default_leaf, 1, 64, "most triangles in a leaf of the binary BVH")};
+}
+
+BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   BVHBuildParams p;
-  p.bins = cfg.get_int("bins", p.bins);
-  p.max_leaf = cfg.get_int("leaf_size", default_leaf);
-  if (p.bins < 2 || p.bins > 256) throw InputError("parameter bins must be in [2, 256]");
-  if (p.max_leaf < 1 || p.max_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");
+  p.bins = cfg.get_int("bins");
+  p.max_leaf = cfg.get_int("leaf_size");
   return p;
 }
 

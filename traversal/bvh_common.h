@@ -17,8 +17,11 @@ struct BVHData {
   }
 };
 
-// BVH build parameters from a scheme's config: `bins`, `leaf_size`.
-BVHBuildParams bvh_params(const SchemeConfig& cfg, int default_leaf = 4);
+// The binary BVH's parameters, `bins` and `leaf_size`, as a scheme declares them (its
+// params_<name>() returns these plus its own), and the build parameters read from a config
+// resolved against them.
+ParamSpecs bvh_param_specs(int default_leaf = 4);
+BVHBuildParams bvh_params(const SchemeConfig& cfg);
 // Fetches (building on first use) the BVH and the triangle set the kernel `cfg.kernel` needs.
 BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel);
 
