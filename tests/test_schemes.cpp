@@ -3,6 +3,7 @@
 #include <set>
 #include <tuple>
 
+#include "structures/bvh.h"
 #include "test_util.h"
 #include "workloads/hard_cases.h"
 

@@ -17,12 +17,7 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
 BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel) {
   BVHData d;
   d.bvh = cache.get<BVH>(params.key(), [&] { return BVH::build(scene, params); });
-  const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-  d.tris = cache.get<TriangleSet>(params.key() + (planes ? ":tris+planes" : ":tris"), [&] {
-    TriangleSet t;
-    t.build(scene, d.bvh->prim_index, kernel);
-    return t;
-  });
+  d.tris = fetch_triangles(scene, cache, params.key(), kernel, [&] { return d.bvh->prim_index; });
   return d;
 }
 

@@ -1,5 +1,7 @@
 #include "traversal/kd_common.h"
 
+#include "traversal/bvh_common.h"
+
 namespace tb {
 
 ParamSpecs kd_param_specs() {
@@ -30,12 +32,7 @@ KDBuildParams kd_params(const SchemeConfig& cfg) {
 KDData fetch_kd(const Scene& scene, StructureCache& cache, const KDBuildParams& params, TriKernel kernel) {
   KDData d;
   d.tree = cache.get<KDTree>(params.key(), [&] { return KDTree::build(scene, params); });
-  const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-  d.tris = cache.get<TriangleSet>(params.key() + (planes ? ":tris+planes" : ":tris"), [&] {
-    TriangleSet t;
-    t.build(scene, d.tree->prim_index, kernel);
-    return t;
-  });
+  d.tris = fetch_triangles(scene, cache, params.key(), kernel, [&] { return d.tree->prim_index; });
   return d;
 }
 

@@ -34,14 +34,8 @@ MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHB
     auto bvh = cache.get<BVH>(params.bvh.key(), [&] { return BVH::build(scene, params.bvh); });
     return MBVH<N, W>::collapse(scene, *bvh, params);
   });
-  if (kernel != TriKernel::watertight) {
-    const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-    d.tris = cache.get<TriangleSet>(key + (planes ? ":tris+planes" : ":tris"), [&] {
-      TriangleSet t;
-      t.build(scene, d.mbvh->lane_prims(), kernel);
-      return t;
-    });
-  }
+  if (kernel != TriKernel::watertight)  // the watertight kernel reads the SIMD blocks
+    d.tris = fetch_triangles(scene, cache, key, kernel, [&] { return d.mbvh->lane_prims(); });
   return d;
 }
 
