@@ -7,6 +7,7 @@
 // errors keep their own non-zero codes), 1 for anything else; never a signal.
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
@@ -49,6 +50,18 @@ void print_list(const std::string& what, bool headed) {
   if (what == "scenes" || what.empty()) section("scenes", builtin_scene_names());
   if (what == "workloads" || what.empty()) section("workloads", workload_names());
   if (what == "tables") section("tables", table_names());
+}
+
+// `list params [SCHEME]`: each scheme's declared --param keys (traversal/params.h).
+void print_params(const std::string& scheme) {
+  for (const auto& s : schemes()) {
+    if (!scheme.empty() && s.name != scheme) continue;
+    if (scheme.empty()) std::printf("%s:%s\n", s.name.c_str(), s.params.empty() ? " (no parameters)" : "");
+    for (const auto& p : s.params)
+      std::printf("%s%-15s %-26s default %-7s %s\n", scheme.empty() ? "  " : "", p.name.c_str(), p.type_text().c_str(),
+                  p.fallback.empty() ? "auto" : p.fallback.c_str(), p.doc.c_str());
+    if (!scheme.empty() && s.params.empty()) std::printf("(%s takes no parameters)\n", s.name.c_str());
+  }
 }
 
 // Parses repeated --param key=value options into the scheme config.
@@ -128,32 +141,42 @@ int main(int argc, char** argv) {
     return "travbench: error: " + one_line(e.what()) + " (see travbench --help)\n";
   });
 
-  std::string list_what;
-  auto* list = app.add_subcommand("list", "List schemes, scenes, workloads (one per line) or tables");
-  list->add_option("what", list_what, "schemes | scenes | workloads | tables")
-      ->check(CLI::IsMember({"schemes", "scenes", "workloads", "tables"}));
+  std::string list_what, list_scheme;
+  auto* list = app.add_subcommand("list", "List schemes, scenes, workloads (one per line), tables, or params [SCHEME]");
+  list->add_option("what", list_what, "schemes | scenes | workloads | tables | params")
+      ->check(CLI::IsMember({"schemes", "scenes", "workloads", "tables", "params"}));
+  list->add_option("scheme", list_scheme, "with params: only this scheme's")->check(kScheme);
 
+  // Each subcommand gets only the options it uses (issue 15, part 6).
   RunOptions ro;
   std::string scene_arg, schemes_arg = "all", workloads_arg = "primary", csv_path, kernel = "watertight";
   std::vector<std::string> params;
-  auto add_common = [&](CLI::App* c, bool need_schemes) {
+  auto add_scene = [&](CLI::App* c) {
     c->add_option("--scene", scene_arg, "built-in scene name or scene file path")->required()->check(kScene);
-    if (need_schemes)
-      c->add_option("--schemes", schemes_arg, "comma-separated scheme names or 'all'")->check(kSchemes);
+  };
+  auto add_tracing = [&](CLI::App* c) {  // whatever traces with a scheme and times it
     c->add_option("--threads", ro.threads, "tracing threads")->check(CLI::Range(1, 256));
     c->add_option("--reps", ro.reps, "timed repetitions (after one warm-up)")->check(CLI::Range(1, 1000));
+    c->add_option("--kernel", kernel, "triangle kernel: watertight | moller | plane | plane_rcp")->check(kKernel);
+    c->add_option("--param", params, "scheme parameter key=value (repeatable; travbench list params)")->check(kParam);
+    c->add_option("--csv", csv_path, "output CSV (a .json provenance sidecar is written beside it)")->check(kOutputFile);
+  };
+  auto add_image = [&](CLI::App* c) {  // whatever generates workloads
     c->add_option("--width", ro.width, "image width for camera workloads")->check(CLI::Range(16, 16384));
     c->add_option("--height", ro.height, "image height for camera workloads")->check(CLI::Range(16, 16384));
     c->add_option("--seed", ro.seed, "workload seed")->check(kSeed);
-    c->add_option("--kernel", kernel, "triangle kernel: watertight | moller | plane | plane_rcp")->check(kKernel);
-    c->add_option("--param", params, "scheme parameter key=value (repeatable), e.g. leaf_size=4")->check(kParam);
-    c->add_option("--csv", csv_path, "output CSV (a .json provenance sidecar is written beside it)")->check(kOutputFile);
+  };
+  auto add_common = [&](CLI::App* c) {
+    add_scene(c);
+    c->add_option("--schemes", schemes_arg, "comma-separated scheme names or 'all'")->check(kSchemes);
+    add_tracing(c);
+    add_image(c);
   };
   // Views: the scene's (scenes.json may list any number; derived views are 3); checked against the
   // loaded scene below, this range only catches nonsense early.
   const auto view_range = CLI::Range(1, 64);
   auto* run = app.add_subcommand("run", "Measure schemes x workloads on one scene -> CSV");
-  add_common(run, true);
+  add_common(run);
   run->add_option("--workloads", workloads_arg, "comma-separated workloads, e.g. primary,bounce:2")->check(kWorkloads);
   run->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
   run->add_flag("--stats", ro.stats, "add node/leaf/triangle counts per ray and rays per visited node");
@@ -165,23 +188,26 @@ int main(int argc, char** argv) {
   std::string table_name;
   auto* table = app.add_subcommand("table", "Reproduce a thesis table -> CSV + terminal table");
   table->add_option("name", table_name, "table name (travbench list tables)")->required()->check(CLI::IsMember(table_names()));
-  add_common(table, true);
+  add_common(table);
   table->get_option("--scene")->required(false);
   table->get_option("--csv")->required();
 
   std::string rays_out, workload_arg;
   auto* rays = app.add_subcommand("rays", "Generate a workload and write it as a ray file");
-  add_common(rays, false);
+  add_scene(rays);
+  add_image(rays);
   rays->add_option("--workload", workload_arg, "workload name")->required()->check(kWorkload);
   rays->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
   rays->add_option("--out", rays_out, "ray file to write")->required()->check(kOutputFile);
 
   std::string scheme_arg, rays_in, hits_out;
-  auto* trace = app.add_subcommand("trace", "Trace a ray file with one scheme and write a hit file");
-  add_common(trace, false);
+  auto* trace = app.add_subcommand(
+      "trace", "Trace a ray file with one scheme: write its hits (--hits) and/or time it against the reference (--csv)");
+  add_scene(trace);
+  add_tracing(trace);
   trace->add_option("--scheme", scheme_arg, "scheme name")->required()->check(kScheme);
   trace->add_option("--rays", rays_in, "ray file to read")->required();
-  trace->add_option("--hits", hits_out, "hit file to write")->required()->check(kOutputFile);
+  trace->add_option("--hits", hits_out, "hit file to write")->check(kOutputFile);
 
   std::string cache_config = "l1=32K:8,l2=256K:8,l3=2M:16", policy = "plru", trace_path;
   auto* cachesim = app.add_subcommand("cachesim", "Replay a Dinero IV din trace through the cache simulator");
@@ -199,11 +225,21 @@ int main(int argc, char** argv) {
     const bool view_given = ro.view > 0;
     if (view_given) ro.view -= 1;  // the CLI counts views from 1
     if (*list) {
-      print_list(list_what, list_what.empty());
+      if (!list_scheme.empty() && list_what != "params")
+        throw InputError("list: a scheme name only goes with 'list params SCHEME'");
+      if (list_what == "params") print_params(list_scheme);
+      else print_list(list_what, list_what.empty());
       return 0;
     }
     if (*cachesim) return cachesim::run_cachesim_command(cache_config, policy, trace_path, std::cout);
     apply_params(ro.scheme_config, params, kernel);
+    // Parameters are checked before any scene is loaded (tables check theirs against their schemes).
+    if (*run) check_run_params(expand_scheme_list(schemes_arg), ro.scheme_config);
+    if (*trace) {
+      check_run_params({scheme_arg}, ro.scheme_config);
+      if (hits_out.empty() && csv_path.empty())
+        throw InputError("trace: nothing to write: give --hits FILE and/or --csv FILE");
+    }
     if (*table) {
       TableOptions to;
       to.scene = scene_arg;
@@ -245,10 +281,29 @@ int main(int argc, char** argv) {
     if (*trace) {
       RayBatch batch = read_rays(rays_in);
       auto t = make_scheme(scheme_arg, ro.scheme_config);
+      const auto t0 = std::chrono::steady_clock::now();
       t->prepare(bench.scene(), bench.cache());
+      const double prepare_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
       std::vector<Hit> hits(batch.size());
-      trace_batch(*t, batch, hits, ro.threads);
-      write_hits(hits_out, hits);
+      if (csv_path.empty() && trace->count("--reps") == 0) {
+        trace_batch(*t, batch, hits, ro.threads);  // hits only: one untimed trace
+      } else {
+        // Timed as `run` times a cell: warm-up, --reps repetitions, accuracy against the reference.
+        const std::vector<Hit> ref = reference_hits_of(bench, batch, ro.threads);
+        const std::string label = "file:" + std::filesystem::path(rays_in).filename().string();
+        Record r = measure_rays(bench, label, batch, ref, *t, ro, hits);
+        r.set("prepare_ms", prepare_ms);
+        std::fprintf(stderr, "%-16s %-14s %8s Mrays/s (min %s, max %s)  mismatch %s\n", scheme_arg.c_str(),
+                     label.c_str(), r.get("mrays_median")->c_str(), r.get("mrays_min")->c_str(),
+                     r.get("mrays_max")->c_str(), r.get("mismatch_rate")->c_str());
+        if (!csv_path.empty()) {
+          write_csv(csv_path, {r},
+                    {{"command", "trace"}, {"scene", scene_arg}, {"scene_hash", bench.scene().content_hash()},
+                     {"rays_file", rays_in}});
+          std::fprintf(stderr, "wrote %s\n", csv_path.c_str());
+        }
+      }
+      if (!hits_out.empty()) write_hits(hits_out, hits);
       return 0;
     }
   } catch (const InputError& e) {

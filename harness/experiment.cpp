@@ -39,15 +39,26 @@ const std::vector<Hit>& Bench::reference_hits(const WorkloadSpec& spec, int thre
 }
 
 Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt) {
-  const RayBatch& batch = bench.rays(spec);
-  const std::vector<Hit>& ref = bench.reference_hits(spec, std::max(2, opt.threads));
-  std::vector<Hit> hits(batch.size());
+  std::vector<Hit> hits;
+  return measure_rays(bench, spec.name(), bench.rays(spec), bench.reference_hits(spec, std::max(2, opt.threads)),
+                      scheme, opt, hits);
+}
+
+std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, int threads) {
+  std::vector<Hit> ref(batch.size());
+  trace_batch(bench.reference(), batch, ref, std::max(2, threads));
+  return ref;
+}
+
+Record measure_rays(const Bench& bench, const std::string& workload, const RayBatch& batch,
+                    const std::vector<Hit>& ref, Traverser& scheme, const RunOptions& opt, std::vector<Hit>& hits) {
+  hits.assign(batch.size(), Hit{});
   const ThroughputStats tp = measure(scheme, batch, hits, opt.threads, opt.reps);
   const Accuracy acc = compare_hits(hits, ref);
   Record r;
   r.set("scene", bench.scene().name)
       .set("triangles", uint64_t(bench.scene().num_triangles()))
-      .set("workload", spec.name())
+      .set("workload", workload)
       .set("scheme", std::string(scheme.name()))
       .set("kernel", std::string(kernel_name(opt.scheme_config.kernel)))
       .set("view", opt.view + 1)
@@ -81,8 +92,9 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
   std::vector<Record> out;
   std::vector<std::unique_ptr<Traverser>> schemes;
   std::vector<double> prepare_ms;
+  check_run_params(opt.schemes, opt.scheme_config);
   for (const auto& name : opt.schemes) {
-    auto t = make_scheme(name, opt.scheme_config);
+    auto t = make_scheme(name, config_for(name, opt.scheme_config));
     const auto t0 = std::chrono::steady_clock::now();
     t->prepare(bench.scene(), bench.cache());
     prepare_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());

@@ -50,6 +50,15 @@ std::string spec_key(const WorkloadSpec& s);
 
 // Measures one (workload, scheme) cell: throughput, accuracy, and counters/cache on request.
 Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt);
+// The same for rays from elsewhere (`travbench trace` of a ray file): `ref` are the reference's
+// hits on `batch`, `workload` labels the row, `hits` receives the scheme's hits.
+Record measure_rays(const Bench& bench, const std::string& workload, const RayBatch& batch,
+                    const std::vector<Hit>& ref, Traverser& scheme, const RunOptions& opt, std::vector<Hit>& hits);
+// The reference's hits on a batch that is not one of the bench's workloads.
+std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, int threads);
+
+// Every scheme of opt.schemes on every workload; --param keys are checked against the run's
+// schemes as a whole (check_run_params), each scheme sees those it declares.
 
 std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt);
 

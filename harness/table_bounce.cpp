@@ -58,10 +58,10 @@ int bounce_table(const TableOptions& opt) {
   std::vector<Record> records;
   for (const auto& name : names) {
     const SchemeInfo& info = find_scheme(name);
-    SchemeConfig cfg = opt.run.scheme_config;
+    SchemeConfig cfg = config_for(name, opt.run.scheme_config);
     if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
     const std::string layout = thesis_layout(name, cfg);
-    auto t = info.make(cfg);
+    auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());
     for (size_t depth = 0; depth < workloads.size(); ++depth) {
       Record r = measure_cell(bench, table_spec(opt, workloads[depth]), *t, run);

@@ -85,7 +85,7 @@ int build_table(const TableOptions& opt) {
     std::vector<std::unique_ptr<Traverser>> built;
     const Timing ms = median_ms(reps, [&] {
       caches.push_back(std::make_unique<StructureCache>(scene));
-      built.push_back(make_scheme(name, opt.run.scheme_config));
+      built.push_back(make_scheme(name, config_for(name, opt.run.scheme_config)));
       built.back()->prepare(scene, *caches.back());
     });
     const Traverser* t = built.back().get();

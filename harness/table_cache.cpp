@@ -31,14 +31,16 @@ int cache_table(const TableOptions& opt) {
       if (s.name == "raygrid") return true;
     return false;
   }();
+  const std::vector<std::string> names = default_schemes(opt);
   if (has_raygrid)
     for (int m : {64, 128, 256, 512, 1024}) {
-      SchemeConfig c = run.scheme_config;
+      SchemeConfig c = config_for("raygrid", run.scheme_config);
       c.params["queue"] = std::to_string(m);
       cells.push_back({"raygrid", "raygrid M=" + std::to_string(m), "batch" + std::to_string(m), c});
     }
-  for (const auto& name : default_schemes(opt))
-    if (name != "raygrid") cells.push_back({name, name, name == "mbvh_rs" ? "mbvh_rs" : "", run.scheme_config});
+  for (const auto& name : names)
+    if (name != "raygrid")
+      cells.push_back({name, name, name == "mbvh_rs" ? "mbvh_rs" : "", config_for(name, run.scheme_config)});
   const bool conference = bench.scene().name == "conference";
   std::vector<Record> records;
   for (const Cell& c : cells) {

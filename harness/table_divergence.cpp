@@ -43,7 +43,7 @@ int divergence_table(const TableOptions& opt) {
 
   std::vector<std::unique_ptr<Traverser>> schemes;
   for (const auto& name : scheme_names) {
-    schemes.push_back(make_scheme(name, opt.run.scheme_config));
+    schemes.push_back(make_scheme(name, config_for(name, opt.run.scheme_config)));
     schemes.back()->prepare(bench.scene(), bench.cache());
   }
 

@@ -73,23 +73,25 @@ int raygrid_table(const TableOptions& opt) {
   const ThesisTable t10 = load_thesis_table("table08_10_rays_per_node.csv");
   Bench bench(load_scene(scene_arg));
   const std::string tscene = thesis_scene(bench.scene().name);
+  // The table's own parameter; the others are the schemes'.
+  const ParamSpec sweep_param = bool_param("sweep", false, "also run the queue-size sweep of thesis 5.3.5 on bounce:3");
+  const std::vector<std::string> names = default_schemes(opt, {"mbvh4_single", "mbvh_rs", "raygrid"}, {sweep_param});
   SchemeConfig base = opt.run.scheme_config;
-  const bool sweep = base.get_int("sweep", 0) != 0;
+  const bool sweep = param_to_bool(base.params.count("sweep") ? base.params.at("sweep") : sweep_param.fallback);
   base.params.erase("sweep");
   RunOptions run = opt.run;
   run.scheme_config = base;
   run.stats = true;  // Table 10 needs the instrumented pass
-  const std::vector<std::string> names = default_schemes(opt, {"mbvh4_single", "mbvh_rs", "raygrid"});
 
   // Table 9 and 10: every scheme on bounce:1..4. (The thesis' Table 10 starts at primary rays;
   // Table 9, and this table, at the first bounce.)
   std::vector<Record> records;
   for (const auto& name : names) {
     const SchemeInfo& info = find_scheme(name);
-    SchemeConfig cfg = base;
+    SchemeConfig cfg = config_for(name, base);
     if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
     const std::string layout = thesis_layout(name, cfg);
-    auto t = info.make(cfg);
+    auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());
     for (int k = 1; k <= 4; ++k) {
       raygrid_reset_stats(*t);
@@ -148,7 +150,7 @@ int raygrid_table(const TableOptions& opt) {
     const double single = single_mrays(spec.name());
     for (int leaf_prims : {1024, 4096, 16384})
       for (int m : {64, 128, 256, 384, 512, 1024}) {
-        SchemeConfig cfg = base;
+        SchemeConfig cfg = config_for("raygrid", base);
         cfg.params["queue"] = std::to_string(m);
         cfg.params["leaf_prims"] = std::to_string(leaf_prims);
         const std::string layout = thesis_layout("raygrid", cfg);

@@ -18,7 +18,7 @@ int scaling_table(const TableOptions& opt) {
     Bench bench(load_scene(scene_name));
     const WorkloadSpec spec = table_spec(opt, "bounce:2");
     for (const auto& name : default_schemes(opt)) {
-      auto t = make_scheme(name, opt.run.scheme_config);
+      auto t = make_scheme(name, config_for(name, opt.run.scheme_config));
       t->prepare(bench.scene(), bench.cache());
       Record r = measure_cell(bench, spec, *t, opt.run);
       r.set("structure_mb", double(t->structure_bytes()) / (1024.0 * 1024.0));

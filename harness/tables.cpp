@@ -15,7 +15,9 @@ namespace tb {
 #include "harness/tables.def"
 #undef TB_TABLE
 
-std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback) {
+namespace {
+
+std::vector<std::string> table_schemes(const TableOptions& opt, const std::vector<std::string>& fallback) {
   if (!opt.run.schemes.empty()) return opt.run.schemes;
   if (!fallback.empty()) {
     std::vector<std::string> known;  // keep only registered schemes, in the given order
@@ -28,6 +30,15 @@ std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<st
   for (const auto& s : schemes())
     if (s.name != "reference") all.push_back(s.name);
   return all;
+}
+
+}  // namespace
+
+std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback,
+                                         const ParamSpecs& table_params) {
+  std::vector<std::string> names = table_schemes(opt, fallback);
+  check_run_params(names, opt.run.scheme_config, table_params);
+  return names;
 }
 
 std::string thesis_layout(const std::string& scheme, SchemeConfig& cfg) {
@@ -81,7 +92,7 @@ int accuracy_table(const TableOptions& opt) {
     for (const auto& scheme : default_schemes(opt)) {
       const SchemeInfo& info = find_scheme(scheme);
       for (const Variant& var : variants_of(info, opt.run.scheme_config)) {
-        auto t = info.make(var.config);
+        auto t = make_scheme(scheme, config_for(scheme, var.config));
         t->prepare(bench.scene(), bench.cache());
         for (const auto& w : workloads) {
           WorkloadSpec spec = parse_workload(w);

@@ -18,7 +18,10 @@ std::vector<std::string> table_names();
 
 // What the table functions (harness/table_*.cpp) share.
 // The schemes a table measures: --schemes when given, else `fallback` (those registered), else all.
-std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback = {});
+// Checks --param against them (check_run_params) and `table_params`, the table's own parameters;
+// each scheme is then made with config_for(name, ...), so it sees only the keys it declares.
+std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback = {},
+                                         const ParamSpecs& table_params = {});
 // A workload spec with the table's image size and seed.
 WorkloadSpec table_spec(const TableOptions& opt, const std::string& workload, uint32_t view = 0);
 // The thesis' layout for the stream schemes of Tables 7-10: mbvh_rs and raygrid default to 8-wide

@@ -16,38 +16,6 @@ std::string KDBuildParams::key() const {
   return buf;
 }
 
-KDBuildParams KDBuildParams::from_params(const std::map<std::string, std::string>& params) {
-  KDBuildParams p;
-  auto number = [&](const char* key, double fallback, double lo, double hi) {
-    auto it = params.find(key);
-    if (it == params.end()) return fallback;
-    double v = 0;
-    size_t used = 0;
-    try {
-      v = std::stod(it->second, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != it->second.size() || !(v >= lo && v <= hi))
-      throw InputError("parameter " + std::string(key) + "=" + it->second + " must be a number in [" +
-                       std::to_string(lo) + ", " + std::to_string(hi) + "]");
-    return v;
-  };
-  auto integer = [&](const char* key, int fallback, int lo, int hi) {
-    const double v = number(key, fallback, lo, hi);
-    if (v != std::floor(v)) throw InputError("parameter " + std::string(key) + " must be an integer");
-    return int(v);
-  };
-  p.cost_traversal = float(number("kd_ct", p.cost_traversal, 1e-6, 1e6));
-  p.cost_intersect = float(number("kd_ci", p.cost_intersect, 1e-6, 1e6));
-  p.empty_bonus = float(number("kd_empty_bonus", p.empty_bonus, 0.0, 0.99));
-  p.max_depth = integer("kd_max_depth", p.max_depth, 0, KDTree::kMaxDepth);
-  p.min_leaf = integer("kd_min_leaf", p.min_leaf, 0, 1 << 20);
-  p.max_leaf = integer("kd_max_leaf", p.max_leaf, 1, 1 << 30);
-  p.planar_both = integer("kd_planar_both", p.planar_both, 0, 1) != 0;
-  return p;
-}
-
 std::string KDStats::describe() const {
   char buf[320];
   std::snprintf(buf, sizeof buf,

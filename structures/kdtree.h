@@ -83,10 +83,7 @@ struct KDBuildParams {
   // Havran 2006; also enables flat cells that peel such triangles off a cell face), or by both
   // children (true: the literal "every cell the triangle touches", kept to measure its cost).
   bool planar_both = false;
-  std::string key() const;  // for the structure cache
-  // From a scheme's --param map: kd_ct, kd_ci, kd_empty_bonus, kd_max_depth, kd_min_leaf,
-  // kd_max_leaf (other keys are ignored). Throws InputError on malformed or out-of-range values.
-  static KDBuildParams from_params(const std::map<std::string, std::string>& params);
+  std::string key() const;  // for the structure cache (a scheme's --param keys: traversal/kd_common.h)
 };
 
 struct KDStats {

@@ -358,47 +358,5 @@ template struct MBVH<4, 4>;
 template struct MBVH<8, 4>;
 template struct MBVH<8, 8>;
 
-MBVHBuildParams mbvh_params(const SchemeConfig& cfg, int default_leaf, int default_merge, bool default_sah) {
-  const SchemeConfig& c = cfg;
-  MBVHBuildParams p;
-  p.sah_collapse = default_sah;
-  p.bvh.bins = c.get_int("bins", p.bvh.bins);
-  p.bvh.max_leaf = c.get_int("leaf_size", default_leaf);
-  p.merge = c.get_int("merge", default_merge);
-  p.tri_cost = c.get_int("tri_cost", p.tri_cost);
-  if (auto it = c.params.find("collapse"); it != c.params.end()) {
-    if (it->second != "greedy" && it->second != "sah") throw InputError("parameter collapse must be greedy or sah");
-    p.sah_collapse = it->second == "sah";
-  }
-  p.small = c.get_int("small", p.small);
-  if (p.small != 0 && p.small != 4) throw InputError("parameter small must be 0 or 4");
-  if (p.tri_cost < 1 || p.tri_cost > 10000) throw InputError("parameter tri_cost must be in [1, 10000]");
-  if (p.bvh.bins < 2 || p.bvh.bins > 256) throw InputError("parameter bins must be in [2, 256]");
-  if (p.bvh.max_leaf < 1 || p.bvh.max_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");
-  if (p.merge < 0 || p.merge > 64) throw InputError("parameter merge must be in [0, 64]");
-  return p;
-}
-
-template <int N, int W>
-MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel) {
-  MBVHData<N, W> d;
-  const std::string key = params.key(N, W);
-  // The cache holds its lock while building, so the binary BVH is fetched first, not inside.
-  auto bvh = cache.get<BVH>(params.bvh.key(), [&] { return BVH::build(scene, params.bvh); });
-  d.mbvh = cache.get<MBVH<N, W>>(key, [&] { return MBVH<N, W>::collapse(scene, *bvh, params); });
-  if (kernel != TriKernel::watertight) {
-    const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-    d.tris = cache.get<TriangleSet>(key + (planes ? ":tris+planes" : ":tris"), [&] {
-      TriangleSet t;
-      t.build(scene, d.mbvh->lane_prims(), kernel);
-      return t;
-    });
-  }
-  return d;
-}
-
-template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
-template MBVHData<8, 4> fetch_mbvh<8, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
-template MBVHData<8, 8> fetch_mbvh<8, 8>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
 
 }  // namespace tb

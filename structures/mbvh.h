@@ -141,11 +141,7 @@ size_t mbvh_bytes(const MBVHData<N, W>& d, TriKernel k) {
   return d.mbvh->stats.node_bytes + d.mbvh->stats.tri_bytes +
          (d.tris ? d.tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t)) : 0);
 }
-// Build parameters from a scheme's config: `bins`, `leaf_size` (binary BVH), `merge`,
-// `collapse` (greedy | sah), `tri_cost`, `small` (0 | 4).
-MBVHBuildParams mbvh_params(const SchemeConfig& cfg, int default_leaf, int default_merge, bool default_sah = false);
-// Fetches (building on first use; the binary BVH is shared through the cache too) the MBVH.
-template <int N, int W>
-MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel);
+// mbvh_params and fetch_mbvh (a scheme's config -> MBVHBuildParams; the cached MBVH) live in
+// traversal/mbvh_fetch.h.
 
 }  // namespace tb

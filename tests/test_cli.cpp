@@ -66,6 +66,75 @@ TEST(CLI, RaysAndTraceRoundTrip) {
   std::filesystem::remove_all(dir);
 }
 
+// `trace --reps N --csv F` times a ray file made elsewhere like `run` times a cell: the same
+// columns, the reps asked for, accuracy against the reference on those rays.
+TEST(CLI, TraceTimesARayFileIntoTheRunColumns) {
+  const auto dir = test::temp_dir("cli_trace_csv");
+  const std::string rays = (dir / "r.bin").string(), csv = (dir / "f.csv").string(), hits = (dir / "h.bin").string();
+  ASSERT_EQ(travbench("rays --scene room --workload bounce:1 --width 32 --height 32 --out " + rays).code, 0);
+  const Result t = travbench("trace --scene room --scheme bvh_single --rays " + rays + " --reps 3 --csv " + csv +
+                             " --hits " + hits + " --param leaf_size=8");
+  ASSERT_EQ(t.code, 0) << t.out;
+  std::ifstream f(csv);
+  std::string header, row;
+  std::getline(f, header);
+  std::getline(f, row);
+  auto column = [&](const std::string& name) {
+    std::stringstream hs(header), rs(row);
+    for (std::string h, v; std::getline(hs, h, ',') && std::getline(rs, v, ',');)
+      if (h == name) return v;
+    return std::string("<missing>");
+  };
+  for (const char* col : {"scene", "triangles", "workload", "scheme", "kernel", "rays", "threads", "reps",
+                          "mrays_median", "mrays_min", "mrays_max", "mismatch_rate", "false_miss", "false_hit",
+                          "prepare_ms"})
+    EXPECT_NE(column(col), "<missing>") << col << " in " << header;
+  EXPECT_EQ(column("reps"), "3");
+  EXPECT_EQ(column("scheme"), "bvh_single");
+  EXPECT_EQ(column("workload"), "file:r.bin");
+  EXPECT_EQ(column("false_miss"), "0");
+  EXPECT_LE(std::stod(column("mrays_min")), std::stod(column("mrays_median")));
+  EXPECT_LE(std::stod(column("mrays_median")), std::stod(column("mrays_max")));
+  EXPECT_GT(std::stoull(column("rays")), 0u);
+  EXPECT_GT(std::filesystem::file_size(hits), 16u);
+  EXPECT_TRUE(std::filesystem::exists(dir / "f.json"));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(CLI, ListParamsPrintsEachSchemesDeclaredParameters) {
+  const Result one = travbench("list params bvh_single");
+  EXPECT_EQ(one.code, 0) << one.out;
+  EXPECT_NE(one.out.find("leaf_size"), std::string::npos) << one.out;
+  EXPECT_NE(one.out.find("[1, 64]"), std::string::npos) << one.out;
+  EXPECT_EQ(one.out.find("queue"), std::string::npos) << "only bvh_single's: " << one.out;
+  const Result all = travbench("list params");
+  EXPECT_EQ(all.code, 0);
+  for (const auto& s : schemes()) {
+    EXPECT_NE(all.out.find(s.name + ":"), std::string::npos) << s.name;
+    for (const auto& p : s.params) EXPECT_NE(all.out.find(p.name), std::string::npos) << s.name << " " << p.name;
+  }
+}
+
+// A parameter of a multi-scheme run is fine when one scheme of the run declares it (the others
+// ignore it); the typo of the issue fails with the right name.
+TEST(CLI, RunParametersAreCheckedAgainstTheRunsSchemes) {
+  const auto dir = test::temp_dir("cli_params");
+  const std::string csv = " --csv " + (dir / "x.csv").string();
+  const std::string run = "run --scene sphere --workloads primary --reps 1 --width 16 --height 16 ";
+  const Result ok = travbench(run + "--schemes bvh_single,embree_single --param leaf_size=8" + csv);
+  EXPECT_EQ(ok.code, 0) << ok.out;
+  const Result typo = travbench(run + "--schemes bvh_single --param leafsize=8" + csv);
+  EXPECT_NE(typo.code, 0);
+  EXPECT_LT(typo.code, 128);
+  EXPECT_NE(typo.out.find("leaf_size"), std::string::npos) << typo.out;
+  const Result none = travbench(run + "--schemes bvh_single,embree_single --param queue=64" + csv);
+  EXPECT_NE(none.code, 0) << none.out;
+  const Result range = travbench(run + "--schemes bvh_single --param bins=1" + csv);
+  EXPECT_NE(range.code, 0) << range.out;
+  EXPECT_NE(range.out.find("bins=1"), std::string::npos) << range.out;
+  std::filesystem::remove_all(dir);
+}
+
 TEST(CLI, BadInputGivesOneLineAndNonZeroExit) {
   const auto dir = test::temp_dir("cli_bad");
   std::ofstream(dir / "bad.bin") << "not rays";

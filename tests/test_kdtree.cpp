@@ -9,6 +9,7 @@
 #include "structures/clip.h"
 #include "structures/kdtree.h"
 #include "test_util.h"
+#include "traversal/kd_common.h"
 #include "workloads/hard_cases.h"
 
 namespace tb {
@@ -355,13 +356,17 @@ TEST(KDTree, ParametersShapeTheTree) {
   EXPECT_EQ(d.stats.nodes, 1u);
   EXPECT_EQ(d.stats.references, s.num_triangles());
   // Parameters from --param, and their validation.
-  const KDBuildParams p = KDBuildParams::from_params({{"kd_ct", "3.5"}, {"kd_max_depth", "20"}, {"kd_empty_bonus", "0"}});
+  auto from_params = [](std::map<std::string, std::string> m) {
+    return kd_params(resolve_config("kd_single", SchemeConfig{TriKernel::watertight, std::move(m)}));
+  };
+  const KDBuildParams p = from_params({{"kd_ct", "3.5"}, {"kd_max_depth", "20"}, {"kd_empty_bonus", "0"}});
   EXPECT_EQ(p.cost_traversal, 3.5f);
   EXPECT_EQ(p.max_depth, 20);
   EXPECT_EQ(p.empty_bonus, 0.f);
-  EXPECT_THROW(KDBuildParams::from_params({{"kd_ci", "abc"}}), InputError);
-  EXPECT_THROW(KDBuildParams::from_params({{"kd_max_depth", "65"}}), InputError);
-  EXPECT_THROW(KDBuildParams::from_params({{"kd_max_leaf", "2.5"}}), InputError);
+  EXPECT_EQ(from_params({}).key(), KDBuildParams{}.key());  // the declared defaults are the struct's
+  EXPECT_THROW(from_params({{"kd_ci", "abc"}}), InputError);
+  EXPECT_THROW(from_params({{"kd_max_depth", "65"}}), InputError);
+  EXPECT_THROW(from_params({{"kd_max_leaf", "2.5"}}), InputError);
   EXPECT_THROW(make_scheme("kd_packet", SchemeConfig{TriKernel::watertight, {{"kd_packet", "12"}}}), InputError);
   EXPECT_NE(c.stats.describe().find("refs_per_tri="), std::string::npos);
 }

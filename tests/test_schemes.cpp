@@ -1,5 +1,9 @@
 // Every registered scheme against the reference on the built-in scenes and every workload
 // (iterates the registry, so a new scheme is covered without touching this file).
+#include <set>
+#include <tuple>
+
+#include "structures/bvh.h"
 #include "test_util.h"
 #include "workloads/hard_cases.h"
 
@@ -73,6 +77,103 @@ TEST_P(SchemeRobustness, NoLeaksOnMustHitHardCases) {
       }
     }
   }
+}
+
+// ---- Registry-level checks: a scheme's name is written in schemes.def, in make_<name> and in its
+// name(); its parameters in params_<name>() and where the constructor reads them. These tie them.
+
+TEST(Registry, NamesAgreeAndEverySchemeIsMadeFromItsDeclaredDefaults) {
+  for (const auto& s : schemes()) {
+    // make_scheme resolves the declared defaults; a constructor that reads an undeclared key (or a
+    // key without a default through get_*) throws std::logic_error here.
+    std::unique_ptr<Traverser> t;
+    ASSERT_NO_THROW(t = make_scheme(s.name)) << s.name;
+    EXPECT_EQ(std::string(t->name()), s.name) << "schemes.def and name() disagree";
+    std::set<std::string> seen;
+    for (const auto& p : s.params) {
+      EXPECT_TRUE(seen.insert(p.name).second) << s.name << " declares " << p.name << " twice";
+      EXPECT_FALSE(p.doc.empty()) << s.name << " " << p.name;
+      if (p.fallback.empty()) continue;  // default depends on another parameter
+      EXPECT_NO_THROW(p.check(p.fallback)) << s.name << " " << p.name << "'s default is outside its range";
+      // Given explicitly at its default, every parameter is accepted.
+      SchemeConfig c;
+      c.params[p.name] = p.fallback;
+      EXPECT_NO_THROW(make_scheme(s.name, c)) << s.name << " " << p.name << "=" << p.fallback;
+    }
+  }
+}
+
+TEST(Registry, UnknownParameterIsAnErrorNamingTheClosestKey) {
+  SchemeConfig c;
+  c.params["leafsize"] = "8";
+  try {
+    make_scheme("bvh_single", c);
+    FAIL() << "leafsize accepted";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("did you mean leaf_size"), std::string::npos) << m;
+    EXPECT_NE(m.find("bins"), std::string::npos) << "names the valid keys: " << m;
+  }
+  c.params = {{"zzzzzz", "1"}};
+  try {
+    make_scheme("reference", c);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()).find("did you mean"), std::string::npos) << "nothing is close: " << e.what();
+  }
+  EXPECT_EQ(closest_name("Leaf-Size", {"bins", "leaf_size"}), "leaf_size");
+  EXPECT_EQ(closest_name("tricul", {"split", "tricull", "last"}), "tricull");
+}
+
+TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
+  const std::vector<std::tuple<std::string, std::string, std::string>> bad = {
+      {"bvh_single", "leaf_size", "0"},  {"bvh_single", "leaf_size", "65"},   {"bvh_single", "leaf_size", "4.5"},
+      {"bvh_single", "bins", "x"},       {"bvh_masked", "split", "2"},        {"mbvh8_single", "collapse", "best"},
+      {"mbvh8_single", "tri_width", "6"}, {"mbvh_rs", "width", "16"},         {"raygrid", "queue", "0"},
+      {"kd_single", "kd_ct", "nan"},     {"kd_packet", "kd_packet", "12"},     {"embree_single", "robust", "yes"},
+      {"mbvh4_single", "small", "2"},    {"bvh_ranged", "tricull", "-1"}};
+  for (const auto& [scheme, key, value] : bad) {
+    SchemeConfig c;
+    c.params[key] = value;
+    EXPECT_THROW(make_scheme(scheme, c), InputError) << scheme << " " << key << "=" << value;
+  }
+  const std::vector<std::tuple<std::string, std::string, std::string>> good = {
+      {"bvh_single", "leaf_size", "1"}, {"bvh_single", "leaf_size", "64"}, {"bvh_masked", "split", "true"},
+      {"mbvh_rs", "merge", "16"},       {"mbvh_rs", "collapse", "sah"},     {"kd_single", "kd_ct", "3.5"}};
+  for (const auto& [scheme, key, value] : good) {
+    SchemeConfig c;
+    c.params[key] = value;
+    EXPECT_NO_THROW(make_scheme(scheme, c)) << scheme << " " << key << "=" << value;
+  }
+}
+
+TEST(Registry, RunParametersNeedOneSchemeOfTheRunThatDeclaresThem) {
+  SchemeConfig c;
+  c.params = {{"leaf_size", "8"}, {"robust", "0"}};
+  EXPECT_NO_THROW(check_run_params({"bvh_single", "embree_single"}, c));
+  EXPECT_THROW(check_run_params({"bvh_single"}, c), InputError);  // robust: only Embree's
+  const SchemeConfig e = config_for("embree_single", c);
+  EXPECT_EQ(e.params, (std::map<std::string, std::string>{{"robust", "0"}}));
+  const SchemeConfig b = config_for("bvh_single", c);
+  EXPECT_EQ(b.params, (std::map<std::string, std::string>{{"leaf_size", "8"}}));
+  // A caller's own parameters (a table's) count too, and are checked against their spec.
+  const ParamSpecs sweep = {bool_param("sweep", false, "table switch")};
+  c.params = {{"sweep", "1"}};
+  EXPECT_NO_THROW(check_run_params({"raygrid"}, c, sweep));
+  c.params = {{"sweep", "3"}};
+  EXPECT_THROW(check_run_params({"raygrid"}, c, sweep), InputError);
+}
+
+TEST(Registry, ResolvedConfigHoldsDefaultsAndRefusesUndeclaredReads) {
+  const SchemeConfig c = resolve_config("bvh_single", {});
+  EXPECT_EQ(c.get_int("leaf_size"), BVHBuildParams{}.max_leaf);
+  EXPECT_EQ(c.get_int("bins"), BVHBuildParams{}.bins);
+  EXPECT_THROW(c.get_int("queue"), std::logic_error);
+  SchemeConfig given;
+  given.params["merge"] = "12";
+  const SchemeConfig rs = resolve_config("mbvh_rs", given);
+  EXPECT_EQ(rs.find_int("merge"), 12);
+  EXPECT_EQ(resolve_config("mbvh_rs", {}).find_int("merge"), std::nullopt);  // depends on width
 }
 
 INSTANTIATE_TEST_SUITE_P(Registry, SchemeAccuracy, ::testing::ValuesIn(test::schemes_under_test()),

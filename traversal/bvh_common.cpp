@@ -2,24 +2,22 @@
 
 namespace tb {
 
-BVHBuildParams bvh_params(const SchemeConfig& cfg, int default_leaf) {
+ParamSpecs bvh_param_specs(int default_leaf) {
+  return {int_param("bins", BVHBuildParams{}.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
+          int_param("leaf_size", default_leaf, 1, 64, "most triangles in a leaf of the binary BVH")};
+}
+
+BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   BVHBuildParams p;
-  p.bins = cfg.get_int("bins", p.bins);
-  p.max_leaf = cfg.get_int("leaf_size", default_leaf);
-  if (p.bins < 2 || p.bins > 256) throw InputError("parameter bins must be in [2, 256]");
-  if (p.max_leaf < 1 || p.max_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");
+  p.bins = cfg.get_int("bins");
+  p.max_leaf = cfg.get_int("leaf_size");
   return p;
 }
 
 BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel) {
   BVHData d;
   d.bvh = cache.get<BVH>(params.key(), [&] { return BVH::build(scene, params); });
-  const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-  d.tris = cache.get<TriangleSet>(params.key() + (planes ? ":tris+planes" : ":tris"), [&] {
-    TriangleSet t;
-    t.build(scene, d.bvh->prim_index, kernel);
-    return t;
-  });
+  d.tris = fetch_triangles(scene, cache, params.key(), kernel, [&] { return d.bvh->prim_index; });
   return d;
 }
 

@@ -17,8 +17,24 @@ struct BVHData {
   }
 };
 
-// BVH build parameters from a scheme's config: `bins`, `leaf_size`.
-BVHBuildParams bvh_params(const SchemeConfig& cfg, int default_leaf = 4);
+// The binary BVH's parameters, `bins` and `leaf_size`, as a scheme declares them (its
+// params_<name>() returns these plus its own), and the build parameters read from a config
+// resolved against them.
+ParamSpecs bvh_param_specs(int default_leaf = 4);
+BVHBuildParams bvh_params(const SchemeConfig& cfg);
+// The triangle set kernel `kernel` reads for the structure cached under `structure_key`, its
+// triangles in the order `order()` returns (called only when it is built): planes precomputed for
+// the plane kernels, so the two layouts are cached apart.
+template <class Order>
+std::shared_ptr<const TriangleSet> fetch_triangles(const Scene& scene, StructureCache& cache,
+                                                   const std::string& structure_key, TriKernel kernel, Order&& order) {
+  const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
+  return cache.get<TriangleSet>(structure_key + (planes ? ":tris+planes" : ":tris"), [&] {
+    TriangleSet t;
+    t.build(scene, order(), kernel);
+    return t;
+  });
+}
 // Fetches (building on first use) the BVH and the triangle set the kernel `cfg.kernel` needs.
 BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel);
 

@@ -23,7 +23,7 @@ constexpr int kDefaultSplit = 1;
 class BVHMasked final : public TraverserBase<BVHMasked> {
  public:
   explicit BVHMasked(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(bvh_params(cfg)), split_(cfg.get_int("split", kDefaultSplit) != 0) {}
+      : cfg_(cfg), params_(bvh_params(cfg)), split_(cfg.get_bool("split")) {}
   std::string_view name() const override { return "bvh_masked"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
@@ -153,5 +153,8 @@ class BVHMasked final : public TraverserBase<BVHMasked> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_bvh_masked(const SchemeConfig& cfg) { return std::make_unique<BVHMasked>(cfg); }
+ParamSpecs params_bvh_masked() {
+  return bvh_param_specs() + ParamSpecs{bool_param("split", kDefaultSplit, "after the first intersection (bounce, shadow) continue as four 8x8 sub-packets (thesis 3.3)")};
+}
 
 }  // namespace tb

@@ -31,7 +31,7 @@ constexpr int kDefaultSplit = 0;
 class BVHPartition final : public TraverserBase<BVHPartition> {
  public:
   explicit BVHPartition(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(bvh_params(cfg)), split_(cfg.get_int("split", kDefaultSplit) != 0) {}
+      : cfg_(cfg), params_(bvh_params(cfg)), split_(cfg.get_bool("split")) {}
   std::string_view name() const override { return "bvh_partition"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
@@ -147,6 +147,9 @@ class BVHPartition final : public TraverserBase<BVHPartition> {
 
 std::unique_ptr<Traverser> make_bvh_partition(const SchemeConfig& cfg) {
   return std::make_unique<BVHPartition>(cfg);
+}
+ParamSpecs params_bvh_partition() {
+  return bvh_param_specs() + ParamSpecs{bool_param("split", kDefaultSplit, "after the first intersection (bounce, shadow) continue as four 8x8 sub-packets (thesis 3.3)")};
 }
 
 }  // namespace tb

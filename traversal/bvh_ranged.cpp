@@ -51,11 +51,11 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
   explicit BVHRanged(const SchemeConfig& cfg)
       : cfg_(cfg),
         params_(bvh_params(cfg)),
-        split_(cfg.get_int("split", kDefaultSplit) != 0),
-        split_planes_(cfg.get_int("subfrusta", 1) != 0),
-        tricull_(cfg.get_int("tricull", kDefaultTriCull)),
-        leafmask_(cfg.get_int("leafmask", 1) != 0),
-        track_last_(cfg.get_int("last", 1) != 0) {}
+        split_(cfg.get_bool("split")),
+        split_planes_(cfg.get_bool("subfrusta")),
+        tricull_(cfg.get_int("tricull")),
+        leafmask_(cfg.get_bool("leafmask")),
+        track_last_(cfg.get_bool("last")) {}
   std::string_view name() const override { return "bvh_ranged"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
@@ -221,5 +221,14 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_bvh_ranged(const SchemeConfig& cfg) { return std::make_unique<BVHRanged>(cfg); }
+ParamSpecs params_bvh_ranged() {
+  return bvh_param_specs() +
+         ParamSpecs{bool_param("split", kDefaultSplit, "after the first intersection (bounce, shadow) continue as four 8x8 sub-packets (thesis 3.3)"),
+                    bool_param("subfrusta", true, "the two thesis 3.3 split planes (used only with tricull > 0)"),
+                    int_param("tricull", kDefaultTriCull, 0, 1024,
+                              "test leaf triangles against the frustum when at least this many 8-ray groups are active (0: never)"),
+                    bool_param("leafmask", true, "test each 8-ray group against the leaf box before its triangles"),
+                    bool_param("last", true, "track the last active ray too, not just the first")};
+}
 
 }  // namespace tb

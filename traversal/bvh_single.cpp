@@ -87,5 +87,6 @@ class BVHSingle final : public TraverserBase<BVHSingle> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_bvh_single(const SchemeConfig& cfg) { return std::make_unique<BVHSingle>(cfg); }
+ParamSpecs params_bvh_single() { return bvh_param_specs(); }
 
 }  // namespace tb

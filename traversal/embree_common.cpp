@@ -73,10 +73,10 @@ std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, Struct
   return cache.get<EmbreeScene>(key, [&] { return EmbreeScene(scene, quality, robust); });
 }
 
-bool embree_robust(const SchemeConfig& cfg) {
-  int r = cfg.get_int("robust", 1);
-  if (r != 0 && r != 1) throw InputError("parameter robust must be 0 or 1");
-  return r == 1;
+ParamSpecs embree_param_specs() {
+  return {bool_param("robust", true, "RTC_SCENE_FLAG_ROBUST: Embree's watertight mode (0: its fast default)")};
 }
+
+bool embree_robust(const SchemeConfig& cfg) { return cfg.get_bool("robust"); }
 
 }  // namespace tb

@@ -32,6 +32,8 @@ class EmbreeScene {
 RTCDevice embree_device();
 std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, StructureCache& cache,
                                                       EmbreeQuality quality, bool robust);
+// The three Embree schemes' one parameter, `robust`, and its value.
+ParamSpecs embree_param_specs();
 bool embree_robust(const SchemeConfig& cfg);
 
 inline void to_embree(const Ray& r, RTCRayHit& rh) {

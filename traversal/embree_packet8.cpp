@@ -51,5 +51,6 @@ class EmbreePacket8 final : public TraverserBase<EmbreePacket8>, EmbreeTraverser
 std::unique_ptr<Traverser> make_embree_packet8(const SchemeConfig& cfg) {
   return std::make_unique<EmbreePacket8>(cfg);
 }
+ParamSpecs params_embree_packet8() { return embree_param_specs(); }
 
 }  // namespace tb

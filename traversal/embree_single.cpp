@@ -31,5 +31,6 @@ class EmbreeSingle final : public TraverserBase<EmbreeSingle>, EmbreeTraverserBa
 }  // namespace
 
 std::unique_ptr<Traverser> make_embree_single(const SchemeConfig& cfg) { return std::make_unique<EmbreeSingle>(cfg); }
+ParamSpecs params_embree_single() { return embree_param_specs(); }
 
 }  // namespace tb

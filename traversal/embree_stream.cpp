@@ -40,5 +40,6 @@ class EmbreeStream final : public TraverserBase<EmbreeStream>, EmbreeTraverserBa
 }  // namespace
 
 std::unique_ptr<Traverser> make_embree_stream(const SchemeConfig& cfg) { return std::make_unique<EmbreeStream>(cfg); }
+ParamSpecs params_embree_stream() { return embree_param_specs(); }
 
 }  // namespace tb

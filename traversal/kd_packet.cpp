@@ -33,30 +33,13 @@
 
 #include "structures/kdtree.h"
 #include "traversal/bvh_common.h"
+#include "traversal/kd_common.h"
 
 namespace tb {
 namespace {
 
 constexpr int kMaxRays = 256;
 constexpr int kGroups = kMaxRays / 8;
-
-struct KDData {
-  std::shared_ptr<const KDTree> tree;
-  std::shared_ptr<const TriangleSet> tris;
-};
-
-// Same cache keys as kd_single: both schemes share one tree and one triangle set.
-KDData fetch_kd(const Scene& scene, StructureCache& cache, const KDBuildParams& params, TriKernel kernel) {
-  KDData d;
-  d.tree = cache.get<KDTree>(params.key(), [&] { return KDTree::build(scene, params); });
-  const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-  d.tris = cache.get<TriangleSet>(params.key() + (planes ? ":tris+planes" : ":tris"), [&] {
-    TriangleSet t;
-    t.build(scene, d.tree->prim_index, kernel);
-    return t;
-  });
-  return d;
-}
 
 // The suite's one SIMD wrapper (traversal/simd.h), 8 lanes.
 using S = simd::V<8>;
@@ -110,18 +93,13 @@ struct alignas(32) Workspace {
 class KDPacket final : public TraverserBase<KDPacket> {
  public:
   explicit KDPacket(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(KDBuildParams::from_params(cfg.params)), max_rays_(cfg.get_int("kd_packet", kMaxRays)) {
-    if (max_rays_ < 8 || max_rays_ > kMaxRays || max_rays_ % 8 != 0)
-      throw InputError("parameter kd_packet must be a multiple of 8 in [8, 256]");
+      : cfg_(cfg), params_(kd_params(cfg)), max_rays_(cfg.get_int("kd_packet")) {
+    if (max_rays_ % 8 != 0) throw InputError("parameter kd_packet must be a multiple of 8 in [8, 256]");
   }
   std::string_view name() const override { return "kd_packet"; }
   void prepare(const Scene& scene, StructureCache& cache) override { data_ = fetch_kd(scene, cache, params_, cfg_.kernel); }
   std::string structure_info() const override { return data_.tree->stats.describe(); }
-  size_t structure_bytes() const override {
-    const TriangleSet& t = *data_.tris;
-    return data_.tree->stats.bytes + t.verts.size() * sizeof(TriVerts) + t.planes.size() * sizeof(PlaneTri) +
-           t.prim_id.size() * sizeof(uint32_t);
-  }
+  size_t structure_bytes() const override { return data_.bytes(); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -434,5 +412,9 @@ class KDPacket final : public TraverserBase<KDPacket> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_kd_packet(const SchemeConfig& cfg) { return std::make_unique<KDPacket>(cfg); }
+ParamSpecs params_kd_packet() {
+  return kd_param_specs() +
+         ParamSpecs{int_param("kd_packet", kMaxRays, 8, kMaxRays, "most rays of one sub-packet (a multiple of 8)")};
+}
 
 }  // namespace tb

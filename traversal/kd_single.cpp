@@ -14,40 +14,18 @@
 // only ends the search once it lies inside the cell.
 #include "structures/kdtree.h"
 #include "traversal/bvh_common.h"
+#include "traversal/kd_common.h"
 
 namespace tb {
 namespace {
 
-struct KDData {
-  std::shared_ptr<const KDTree> tree;
-  std::shared_ptr<const TriangleSet> tris;  // one entry per leaf reference, in leaf order
-};
-
-// The tree and its triangles in reference order (a triangle referenced by k leaves is stored k
-// times, so a leaf reads one contiguous run; the same layout the BVH schemes use).
-KDData fetch_kd(const Scene& scene, StructureCache& cache, const KDBuildParams& params, TriKernel kernel) {
-  KDData d;
-  d.tree = cache.get<KDTree>(params.key(), [&] { return KDTree::build(scene, params); });
-  const bool planes = kernel == TriKernel::plane || kernel == TriKernel::plane_rcp;
-  d.tris = cache.get<TriangleSet>(params.key() + (planes ? ":tris+planes" : ":tris"), [&] {
-    TriangleSet t;
-    t.build(scene, d.tree->prim_index, kernel);
-    return t;
-  });
-  return d;
-}
-
 class KDSingle final : public TraverserBase<KDSingle> {
  public:
-  explicit KDSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(KDBuildParams::from_params(cfg.params)) {}
+  explicit KDSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(kd_params(cfg)) {}
   std::string_view name() const override { return "kd_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override { data_ = fetch_kd(scene, cache, params_, cfg_.kernel); }
   std::string structure_info() const override { return data_.tree->stats.describe(); }
-  size_t structure_bytes() const override {
-    const TriangleSet& t = *data_.tris;
-    return data_.tree->stats.bytes + t.verts.size() * sizeof(TriVerts) + t.planes.size() * sizeof(PlaneTri) +
-           t.prim_id.size() * sizeof(uint32_t);
-  }
+  size_t structure_bytes() const override { return data_.bytes(); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -158,5 +136,6 @@ class KDSingle final : public TraverserBase<KDSingle> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_kd_single(const SchemeConfig& cfg) { return std::make_unique<KDSingle>(cfg); }
+ParamSpecs params_kd_single() { return kd_param_specs(); }
 
 }  // namespace tb

@@ -4,15 +4,18 @@
 // network of Alg. 2.10, a small stack of (child, entry distance) and culling of popped children
 // beyond the closest hit. Leaves hold SSE blocks of 4 triangles for the watertight test.
 // Dammertz et al. (2008) report 1.6-2.0x over the binary BVH for this layout.
+#include "traversal/mbvh_fetch.h"
 #include "traversal/mbvh_traverse.h"
 
 namespace tb {
 namespace {
 
+// Binary leaves of up to 4 triangles, and subtrees of up to 4 merged into one block.
+constexpr MBVHDefaults kDefaults{4, 4, false, 4};
+
 class MBVH4Single final : public TraverserBase<MBVH4Single> {
  public:
-  // Binary leaves of up to 4 triangles, and subtrees of up to 4 merged into one block.
-  explicit MBVH4Single(const SchemeConfig& cfg) : cfg_(cfg), params_(mbvh_params(cfg, 4, 4)) {}
+  explicit MBVH4Single(const SchemeConfig& cfg) : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)) {}
   std::string_view name() const override { return "mbvh4_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     data_ = fetch_mbvh<4, 4>(scene, cache, params_, cfg_.kernel);
@@ -34,5 +37,6 @@ class MBVH4Single final : public TraverserBase<MBVH4Single> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_mbvh4_single(const SchemeConfig& cfg) { return std::make_unique<MBVH4Single>(cfg); }
+ParamSpecs params_mbvh4_single() { return mbvh_param_specs(kDefaults); }
 
 }  // namespace tb

@@ -13,20 +13,21 @@
 // The watertight 8-wide case runs traversal/mbvh8_traverse.h (child ordering without branching on
 // the number of entered children); the other kernels and tri_width=4 run mbvh.h's mbvh_traverse.
 #include "traversal/mbvh8_traverse.h"
+#include "traversal/mbvh_fetch.h"
 
 namespace tb {
 namespace {
 
+// SAH collapse, leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0):
+// one leaf path instead of a branch between 4- and 8-wide blocks that mispredicts; +3 to +8% on
+// bunny, dragon, buddha and lucy (bounce:2), within noise on the architectural scenes, for ~15%
+// more triangle bytes.
+constexpr MBVHDefaults kDefaults{4, 16, true, 0};
+
 class MBVH8Single final : public TraverserBase<MBVH8Single> {
  public:
   explicit MBVH8Single(const SchemeConfig& cfg)
-      : cfg_(cfg), tri_width_(cfg.get_int("tri_width", 8)), params_(mbvh_params(cfg, 4, 16, true)) {
-    if (tri_width_ != 4 && tri_width_ != 8) throw InputError("parameter tri_width must be 4 or 8");
-    // Every leaf in 8-wide blocks by default (small=0): one leaf path instead of a branch between
-    // 4- and 8-wide blocks that mispredicts; +3 to +8% on bunny, dragon, buddha and lucy (bounce:2),
-    // within noise on the architectural scenes, for ~15% more triangle bytes.
-    if (!cfg.params.count("small")) params_.small = 0;
-  }
+      : cfg_(cfg), tri_width_(cfg.get_int("tri_width")), params_(mbvh_params(cfg, kDefaults)) {}
   std::string_view name() const override { return "mbvh8_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     if (tri_width_ == 4) data4_ = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
@@ -59,5 +60,9 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_mbvh8_single(const SchemeConfig& cfg) { return std::make_unique<MBVH8Single>(cfg); }
+ParamSpecs params_mbvh8_single() {
+  return mbvh_param_specs(kDefaults) +
+         ParamSpecs{int_choice_param("tri_width", 8, {4, 8}, "triangles per leaf block: 4 (SSE) or 8 (AVX2)")};
+}
 
 }  // namespace tb

@@ -22,6 +22,7 @@
 // AVX2 pass). On bounce:3 width=8 ran 1.2-1.35x the 4-wide streams (conference, sponza,
 // crytek_sponza_partial, dragon_100k), mostly from visiting far fewer nodes per ray; it is the
 // default. All scratch lives in the call, so concurrent calls on disjoint ranges are safe.
+#include "traversal/mbvh_fetch.h"
 #include "traversal/mbvh_traverse.h"
 #include "traversal/bvh_common.h"
 #include "traversal/mbvh_stream.h"
@@ -33,18 +34,18 @@ namespace {
 // header comment); width=4 gives the thesis' layout (tests/test_mbvh.cpp pins it there to compare
 // with mbvh4_single's tree).
 constexpr int kDefaultWidth = 8;
+// 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
+// (mbvh8_single's) with leaves of up to 8 triangles (two blocks). bounce:3, rays/s relative
+// to mbvh8_single, merge 4 / 8 / 16: conference 1.12 / 1.23 / 1.26, sponza 1.16 / 1.25 / 1.11.
+constexpr MBVHDefaults kDefaults4{4, 4, false, 4}, kDefaults8{4, 8, true, 4};
 
 class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
  public:
   explicit MBVHRayStream(const SchemeConfig& cfg)
-      : cfg_(cfg), width_(cfg.get_int("width", kDefaultWidth)), stream_(cfg.get_int("stream", 256)) {
-    if (width_ != 4 && width_ != 8) throw InputError("parameter width must be 4 or 8");
-    if (stream_ < 1 || stream_ > 65536) throw InputError("parameter stream must be in [1, 65536]");
-    // 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
-    // (mbvh8_single's) with leaves of up to 8 triangles (two blocks). bounce:3, rays/s relative
-    // to mbvh8_single, merge 4 / 8 / 16: conference 1.12 / 1.23 / 1.26, sponza 1.16 / 1.25 / 1.11.
-    params_ = width_ == 4 ? mbvh_params(cfg, 4, 4) : mbvh_params(cfg, 4, 8, true);
-  }
+      : cfg_(cfg),
+        width_(cfg.get_int("width")),
+        stream_(cfg.get_int("stream")),
+        params_(mbvh_params(cfg, width_ == 4 ? kDefaults4 : kDefaults8)) {}
   std::string_view name() const override { return "mbvh_rs"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     if (width_ == 4) data4_ = fetch_mbvh<4, 4>(scene, cache, params_, cfg_.kernel);
@@ -147,5 +148,13 @@ class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_mbvh_rs(const SchemeConfig& cfg) { return std::make_unique<MBVHRayStream>(cfg); }
+ParamSpecs params_mbvh_rs() {
+  ParamSpecs p = mbvh_param_specs(kDefaults8);
+  for (ParamSpec& s : p)
+    if (s.name == "merge") s = auto_default(s, "4 with width=4, 8 with width=8");
+    else if (s.name == "collapse") s = auto_default(s, "greedy with width=4, sah with width=8");
+  return p + ParamSpecs{int_choice_param("width", kDefaultWidth, {4, 8}, "MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
+                        int_param("stream", 256, 1, 65536, "most rays per stream (consecutive packets of the batch)")};
+}
 
 }  // namespace tb

@@ -150,25 +150,14 @@ struct Scratch {
 class RayGrid final : public TraverserBase<RayGrid> {
  public:
   explicit RayGrid(const SchemeConfig& cfg) : cfg_(cfg) {
-    m_ = cfg.get_int("queue", 768);
-    const int feed = cfg.get_int("feed", int(kMaxChunk));
-    params_.leaf_prims = cfg.get_int("leaf_prims", params_.leaf_prims);
-    params_.max_depth = cfg.get_int("max_depth", params_.max_depth);
-    params_.mbvh_leaf = cfg.get_int("leaf_size", params_.mbvh_leaf);
-    params_.bins = cfg.get_int("bins", params_.bins);
-    // 8-wide mini-MBVHs by default (§5.3.2 uses the SIMD width of its machine, 4): on bounce:3
-    // they made raygrid 5-25% faster than the thesis' 4-wide ones (docs/PERFORMANCE.md).
-    params_.width = cfg.get_int("width", 8);
-    params_.merge = cfg.get_int("merge", params_.merge);
-    if (params_.width != 4 && params_.width != 8) throw InputError("parameter width must be 4 or 8");
-    if (m_ < 1 || m_ > 65535) throw InputError("parameter queue must be in [1, 65535]");
-    if (feed < 1) throw InputError("parameter feed must be >= 1");
-    feed_ = uint32_t(feed);
-    if (params_.leaf_prims < 1) throw InputError("parameter leaf_prims must be >= 1");
-    if (params_.max_depth < 0 || params_.max_depth > 20) throw InputError("parameter max_depth must be in [0, 20]");
-    if (params_.mbvh_leaf < 1 || params_.mbvh_leaf > 64) throw InputError("parameter leaf_size must be in [1, 64]");
-    if (params_.merge < 0 || params_.merge > 64) throw InputError("parameter merge must be in [0, 64]");
-    if (params_.bins < 2 || params_.bins > 256) throw InputError("parameter bins must be in [2, 256]");
+    m_ = cfg.get_int("queue");
+    feed_ = uint32_t(cfg.get_int("feed"));
+    params_.leaf_prims = cfg.get_int("leaf_prims");
+    params_.max_depth = cfg.get_int("max_depth");
+    params_.mbvh_leaf = cfg.get_int("leaf_size");
+    params_.bins = cfg.get_int("bins");
+    params_.width = cfg.get_int("width");
+    params_.merge = cfg.get_int("merge");
   }
   std::string_view name() const override { return "raygrid"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
@@ -647,5 +636,18 @@ const Octree* raygrid_octree(const Traverser& t) {
 }
 
 std::unique_ptr<Traverser> make_raygrid(const SchemeConfig& cfg) { return std::make_unique<RayGrid>(cfg); }
+ParamSpecs params_raygrid() {
+  const OctreeParams o;
+  return {int_param("queue", 768, 1, 65535, "ray queue capacity M (thesis 5.3: 384 on its machine)"),
+          int_param("feed", int(kMaxChunk), 1, 1 << 30, "rays fed per slice before queues are processed (default: all, Alg. 5.1)"),
+          int_param("leaf_prims", o.leaf_prims, 1, 1 << 30, "subdivide octree nodes referencing more triangles than this"),
+          int_param("max_depth", o.max_depth, 0, 20, "octree depth limit (root: 0)"),
+          int_param("leaf_size", o.mbvh_leaf, 1, 64, "most triangles in a binary SAH leaf of a mini-MBVH"),
+          int_param("bins", o.bins, 2, 256, "binned-SAH bins per axis of the mini-MBVH builds"),
+          // 8-wide mini-MBVHs by default (§5.3.2 uses the SIMD width of its machine, 4): on bounce:3
+          // they made raygrid 5-25% faster than the thesis' 4-wide ones (docs/PERFORMANCE.md).
+          int_choice_param("width", 8, {4, 8}, "mini-MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
+          int_param("merge", o.merge, 0, 64, "binary subtrees of at most this many triangles become one mini-MBVH leaf")};
+}
 
 }  // namespace tb

@@ -111,5 +111,6 @@ class Reference final : public TraverserBase<Reference> {
 }  // namespace
 
 std::unique_ptr<Traverser> make_reference(const SchemeConfig& cfg) { return std::make_unique<Reference>(cfg); }
+ParamSpecs params_reference() { return {}; }
 
 }  // namespace tb

@@ -1,16 +1,20 @@
 #include "traversal/registry.h"
 
+#include <set>
 #include <sstream>
+#include <stdexcept>
 
 namespace tb {
 
-#define TB_SCHEME(name, desc, kernels, baseline) std::unique_ptr<Traverser> make_##name(const SchemeConfig&);
+#define TB_SCHEME(name, desc, kernels, baseline) \
+  std::unique_ptr<Traverser> make_##name(const SchemeConfig&);  \
+  ParamSpecs params_##name();
 #include "traversal/schemes.def"
 #undef TB_SCHEME
 
 const std::vector<SchemeInfo>& schemes() {
   static const std::vector<SchemeInfo> list = {
-#define TB_SCHEME(name, desc, kernels, baseline) {#name, desc, kernels, baseline, make_##name},
+#define TB_SCHEME(name, desc, kernels, baseline) {#name, desc, kernels, baseline, make_##name, params_##name()},
 #include "traversal/schemes.def"
 #undef TB_SCHEME
   };
@@ -18,19 +22,82 @@ const std::vector<SchemeInfo>& schemes() {
 }
 
 const SchemeInfo& find_scheme(const std::string& name) {
-  for (const auto& s : schemes())
+  std::vector<std::string> known;
+  for (const auto& s : schemes()) {
     if (s.name == name) return s;
-  std::string known;
-  for (const auto& s : schemes()) known += (known.empty() ? "" : ", ") + s.name;
-  throw InputError("unknown scheme '" + name + "' (known: " + known + ")");
+    known.push_back(s.name);
+  }
+  const std::string near = closest_name(name, known);
+  throw InputError("unknown scheme '" + name + "'" + (near.empty() ? "" : " (did you mean " + near + "?)") +
+                   " (known: " + join_names(known) + ")");
 }
 
+namespace {
+
+std::vector<std::string> names_of(const ParamSpecs& specs) {
+  std::vector<std::string> out;
+  for (const auto& s : specs) out.push_back(s.name);
+  return out;
+}
+
+// "unknown parameter 'leafsize' for scheme bvh_single (did you mean leaf_size?); valid: bins, leaf_size"
+[[noreturn]] void unknown_param(const std::string& key, const std::vector<std::string>& valid, const std::string& who) {
+  const std::string near = closest_name(key, valid);
+  throw InputError("unknown parameter '" + key + "' for " + who + (near.empty() ? "" : " (did you mean " + near + "?)") +
+                   "; " + (valid.empty() ? "it takes none" : "valid: " + join_names(valid)) +
+                   " (see travbench list params)");
+}
+
+}  // namespace
+
 std::unique_ptr<Traverser> make_scheme(const std::string& name, const SchemeConfig& cfg) {
+  return find_scheme(name).make(resolve_config(name, cfg));
+}
+
+SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg) {
   const SchemeInfo& info = find_scheme(name);
   if (!info.kernels && cfg.kernel != TriKernel::watertight)
     throw InputError("scheme '" + name + "' has its own triangle test and does not take --kernel " +
                      std::string(kernel_name(cfg.kernel)));
-  return info.make(cfg);
+  SchemeConfig resolved;
+  resolved.kernel = cfg.kernel;
+  resolved.declared = &info.params;
+  for (const auto& [key, value] : cfg.params) {
+    const ParamSpec* spec = find_param(info.params, key);
+    if (!spec) unknown_param(key, names_of(info.params), "scheme " + name);
+    spec->check(value);
+    resolved.params[key] = value;
+  }
+  for (const auto& spec : info.params)
+    if (!spec.fallback.empty()) resolved.params.emplace(spec.name, spec.fallback);
+  return resolved;
+}
+
+void check_run_params(const std::vector<std::string>& names, const SchemeConfig& cfg, const ParamSpecs& extra) {
+  std::set<std::string> seen;
+  std::vector<std::string> valid;
+  auto add = [&](const ParamSpecs& specs) {
+    for (const auto& s : specs)
+      if (seen.insert(s.name).second) valid.push_back(s.name);
+  };
+  for (const auto& n : names) add(find_scheme(n).params);
+  add(extra);
+  for (const auto& [key, value] : cfg.params) {
+    if (seen.count(key)) {
+      if (const ParamSpec* e = find_param(extra, key)) e->check(value);
+      continue;
+    }
+    unknown_param(key, valid, (names.size() == 1 ? "scheme " : "schemes ") + join_names(names));
+  }
+}
+
+SchemeConfig config_for(const std::string& name, const SchemeConfig& run_cfg) {
+  const SchemeInfo& info = find_scheme(name);
+  SchemeConfig c;
+  c.kernel = run_cfg.kernel;
+  for (const auto& [key, value] : run_cfg.params)
+    if (find_param(info.params, key)) c.params[key] = value;
+  return c;
 }
 
 std::vector<std::string> expand_scheme_list(const std::string& list) {
@@ -49,17 +116,33 @@ std::vector<std::string> expand_scheme_list(const std::string& list) {
   return out;
 }
 
-int SchemeConfig::get_int(const std::string& key, int fallback) const {
+// ---- SchemeConfig getters: values were checked by make_scheme against the declared specs.
+
+const std::string* SchemeConfig::value(const std::string& key) const {
+  if (declared && !find_param(*declared, key))
+    throw std::logic_error("scheme reads parameter '" + key + "' that it does not declare (params_<scheme>())");
   auto it = params.find(key);
-  if (it == params.end()) return fallback;
-  try {
-    size_t used = 0;
-    int v = std::stoi(it->second, &used);
-    if (used != it->second.size()) throw std::invalid_argument(key);
-    return v;
-  } catch (const std::exception&) {
-    throw InputError("parameter " + key + "=" + it->second + " is not an integer");
-  }
+  return it == params.end() ? nullptr : &it->second;
+}
+
+namespace {
+const std::string& required(const std::string* v, const std::string& key) {
+  if (!v) throw std::logic_error("parameter '" + key + "' has no default: read it with find_*()");
+  return *v;
+}
+}  // namespace
+
+int SchemeConfig::get_int(const std::string& key) const { return param_to_int(required(value(key), key)); }
+bool SchemeConfig::get_bool(const std::string& key) const { return param_to_bool(required(value(key), key)); }
+double SchemeConfig::get_real(const std::string& key) const { return param_to_real(required(value(key), key)); }
+const std::string& SchemeConfig::get_choice(const std::string& key) const { return required(value(key), key); }
+std::optional<int> SchemeConfig::find_int(const std::string& key) const {
+  const std::string* v = value(key);
+  return v ? std::optional<int>(param_to_int(*v)) : std::nullopt;
+}
+std::optional<std::string> SchemeConfig::find_choice(const std::string& key) const {
+  const std::string* v = value(key);
+  return v ? std::optional<std::string>(*v) : std::nullopt;
 }
 
 }  // namespace tb

@@ -1,4 +1,5 @@
-// Scheme registry: name -> factory. `travbench list schemes` and `--schemes all` read it.
+// Scheme registry: name -> factory and declared parameters, one TB_SCHEME line per scheme in
+// traversal/schemes.def. `travbench list schemes`, `list params` and `--schemes all` read it.
 #pragma once
 #include <functional>
 #include <memory>
@@ -14,12 +15,23 @@ struct SchemeInfo {
   std::string description;
   bool kernels = true;    // honours --kernel (Embree has its own kernels)
   bool baseline = false;  // an outside library: measured, not held to the accuracy bar
-  std::function<std::unique_ptr<Traverser>(const SchemeConfig&)> make;
+  std::function<std::unique_ptr<Traverser>(const SchemeConfig&)> make;  // takes a resolved config
+  ParamSpecs params;      // the --param keys the scheme reads
 };
 
 const std::vector<SchemeInfo>& schemes();
 const SchemeInfo& find_scheme(const std::string& name);  // throws InputError on unknown names
+// Makes one scheme. Every key of cfg.params must be one the scheme declares and every value
+// within its declared range (InputError naming the valid keys, and the closest one to a typo).
 std::unique_ptr<Traverser> make_scheme(const std::string& name, const SchemeConfig& cfg = {});
+// What make_scheme hands the scheme's factory: cfg checked as above, `declared` set, defaults filled.
+SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg);
+// The parameters of a run with several schemes share one key space. check_run_params throws
+// InputError unless every key is declared by at least one of `names` (or is one of `extra`, the
+// caller's own parameters, e.g. a table's); config_for then gives scheme `name` the keys it
+// declares, so the others are ignored by it.
+void check_run_params(const std::vector<std::string>& names, const SchemeConfig& cfg, const ParamSpecs& extra = {});
+SchemeConfig config_for(const std::string& name, const SchemeConfig& run_cfg);
 // "all" -> every registered scheme; otherwise the comma-separated names, each checked.
 std::vector<std::string> expand_scheme_list(const std::string& list);
 

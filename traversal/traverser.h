@@ -1,8 +1,14 @@
 // The interface every traversal scheme implements (DESIGN.md core types). A new scheme is one
-// file deriving from TraverserBase plus one line in traversal/registry.cpp.
+// file plus one line: the file derives from TraverserBase and defines
+//   std::unique_ptr<Traverser> make_<name>(const SchemeConfig&);  // reads only declared parameters
+//   ParamSpecs params_<name>();                                     // what --param keys it takes
+// and the line `TB_SCHEME(<name>, "description", honours --kernel, baseline)` goes in
+// traversal/schemes.def (registry.cpp expands it; tests/test_schemes.cpp checks that name()
+// returns <name> and that every declared default is valid). README "Adding a scheme".
 #pragma once
 #include <map>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -10,17 +16,33 @@
 #include "structures/scene.h"
 #include "structures/structure_cache.h"
 #include "traversal/kernels.h"
+#include "traversal/params.h"
 #include "traversal/probe.h"
 #include "workloads/ray_batch.h"
 
 namespace tb {
 
-// Per-scheme options: the triangle kernel (--kernel) and free-form parameters (--param k=v),
-// e.g. `leaf_size=4`, `stream=512`, `queue=384`.
+// Per-scheme options: the triangle kernel (--kernel) and parameters (--param k=v), e.g.
+// `leaf_size=4`, `stream=512`, `queue=384`. As the user gives them, `params` holds text;
+// make_scheme (traversal/registry.h) checks every key and value against the scheme's declared
+// ParamSpecs and hands the scheme a resolved copy: `declared` set, defaults filled in. The getters
+// read that copy; reading a parameter the scheme did not declare is a programming error
+// (std::logic_error), which tests/test_schemes.cpp catches by making every scheme.
 struct SchemeConfig {
   TriKernel kernel = TriKernel::watertight;
   std::map<std::string, std::string> params;
-  int get_int(const std::string& key, int fallback) const;
+  const ParamSpecs* declared = nullptr;
+
+  int get_int(const std::string& key) const;
+  bool get_bool(const std::string& key) const;
+  double get_real(const std::string& key) const;
+  const std::string& get_choice(const std::string& key) const;
+  // For parameters whose default depends on others (ParamSpec::fallback empty): nullopt when not given.
+  std::optional<int> find_int(const std::string& key) const;
+  std::optional<std::string> find_choice(const std::string& key) const;
+
+ private:
+  const std::string* value(const std::string& key) const;
 };
 
 class Traverser {

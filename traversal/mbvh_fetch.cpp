@@ -1,0 +1,46 @@
+#include "traversal/mbvh_fetch.h"
+
+namespace tb {
+
+ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
+  const MBVHBuildParams p;
+  return bvh_param_specs(d.leaf_size) +
+         ParamSpecs{int_param("merge", d.merge, 0, 64,
+                              "binary subtrees of at most this many triangles become one leaf (0: off; SAH "
+                              "collapse: the largest leaf)"),
+                    choice_param("collapse", d.sah ? "sah" : "greedy", {"greedy", "sah"},
+                                 "binary -> wide collapse: greedy (Dammertz 2008) or SAH-optimal (Ylitie 2017)"),
+                    int_param("tri_cost", p.tri_cost, 1, 10000,
+                              "SAH collapse: a triangle-block test's cost in percent of a node visit"),
+                    int_choice_param("small", d.small, {0, 4},
+                                     "8-wide blocks: leaves of at most this many triangles take a 4-wide block")};
+}
+
+MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
+  MBVHBuildParams p;
+  p.bvh = bvh_params(cfg);
+  p.merge = cfg.find_int("merge").value_or(d.merge);
+  p.sah_collapse = cfg.find_choice("collapse").value_or(d.sah ? "sah" : "greedy") == "sah";
+  p.tri_cost = cfg.get_int("tri_cost");
+  p.small = cfg.find_int("small").value_or(d.small);
+  return p;
+}
+
+template <int N, int W>
+MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel) {
+  MBVHData<N, W> d;
+  const std::string key = params.key(N, W);
+  d.mbvh = cache.get<MBVH<N, W>>(key, [&] {
+    auto bvh = cache.get<BVH>(params.bvh.key(), [&] { return BVH::build(scene, params.bvh); });
+    return MBVH<N, W>::collapse(scene, *bvh, params);
+  });
+  if (kernel != TriKernel::watertight)  // the watertight kernel reads the SIMD blocks
+    d.tris = fetch_triangles(scene, cache, key, kernel, [&] { return d.mbvh->lane_prims(); });
+  return d;
+}
+
+template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
+template MBVHData<8, 4> fetch_mbvh<8, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
+template MBVHData<8, 8> fetch_mbvh<8, 8>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
+
+}  // namespace tb
