@@ -1,4 +1,5 @@
 #include "structures/bvh.h"
+#include "structures/bvh_spatial.h"
 
 #include <immintrin.h>
 
@@ -13,9 +14,14 @@
 namespace tb {
 
 std::string BVHBuildParams::key() const {
-  char buf[96];
+  char buf[160];
   std::snprintf(buf, sizeof buf, "bvh:bins=%d:leaf=%d:ct=%g:ci=%g", bins, max_leaf, cost_traversal, cost_intersect);  // threads do not change the tree
-  return buf;
+  std::string k = buf;
+  if (spatial) {
+    std::snprintf(buf, sizeof buf, ":spatial:alpha=%g:budget=%g", split_alpha, split_budget);
+    k += buf;
+  }
+  return k;
 }
 
 std::string BVHStats::describe() const {
@@ -350,6 +356,12 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
 }  // namespace
 
 BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
+  if (p.spatial) {
+    SpatialSplitParams sp;
+    sp.alpha = p.split_alpha;
+    sp.budget = p.split_budget;
+    return build_spatial_bvh(scene, p, sp);
+  }
   const auto t0 = std::chrono::steady_clock::now();
   const uint32_t n = uint32_t(scene.num_triangles());
   // Uninitialised: the loop below writes every reference once.

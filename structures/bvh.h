@@ -36,6 +36,11 @@ struct BVHBuildParams {
   float cost_traversal = 1.f;
   float cost_intersect = 1.f;
   int threads = 1;        // build threads (the tree is the same; node order may differ)
+  // Spatial splits (structures/bvh_spatial.h): the scene build clips straddling triangles
+  // (references may repeat); split_alpha and split_budget are SpatialSplitParams' alpha and budget.
+  bool spatial = false;
+  float split_alpha = 1e-5f;
+  float split_budget = 1.0f;
   std::string key() const;  // for the structure cache
 };
 

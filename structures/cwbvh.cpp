@@ -28,7 +28,6 @@ struct FlushDenormals {
 
 }  // namespace
 
-float cw_scale(int8_t e) { return std::bit_cast<float>(uint32_t(int(e) + 127) << 23); }
 float cw_decode(float p, float s, uint8_t q) { return decode_f(p, s, float(q)); }
 
 int8_t cw_exponent(float p, float hi_max) {

@@ -20,6 +20,7 @@
 // large as the MBVH8's. Unused slots decode to boxes with lo > hi on every axis, which no ray
 // enters.
 #pragma once
+#include <bit>
 #include <cstdint>
 #include <string>
 
@@ -67,7 +68,7 @@ struct CWBVH {
 
 // One axis of a node's grid: the cell size 2^e for origin p and largest coordinate hi, and the
 // 8-bit offsets of [lo, hi] (exposed for tests).
-float cw_scale(int8_t e);
+inline float cw_scale(int8_t e) { return std::bit_cast<float>(uint32_t(int(e) + 127) << 23); }
 int8_t cw_exponent(float p, float hi_max);
 uint8_t cw_quantize_lo(float p, float s, float lo);
 uint8_t cw_quantize_hi(float p, float s, float hi);

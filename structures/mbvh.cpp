@@ -209,6 +209,15 @@ class Collapser {
   }
 
   uint32_t make_leaf(uint32_t first, uint32_t count) {
+    // A spatial-split BVH (structures/bvh_spatial.h) references a triangle from every leaf it
+    // was split into, and a merged leaf can hold several of those references: one lane each would
+    // test the same triangle twice. Keep the first occurrence (a tree without repeats packs
+    // exactly as before).
+    leaf_tris_.clear();
+    for (uint32_t k = first; k < first + count; ++k)
+      if (std::find(leaf_tris_.begin(), leaf_tris_.end(), bvh_.prim_index[k]) == leaf_tris_.end())
+        leaf_tris_.push_back(bvh_.prim_index[k]);
+    count = uint32_t(leaf_tris_.size());
     if (count == 0 || count > mbvh_ref::kMaxLeafTris)
       throw std::runtime_error("mbvh: leaf of " + std::to_string(count) + " triangles (merge/leaf_size must be <= 64)");
     out_.stats.leaves++;
@@ -224,13 +233,13 @@ class Collapser {
     for (uint32_t k = 0; k < nblocks; ++k) out_.blocks.push_back(block_of<W>(first, count, k));
     return mbvh_ref::make_leaf(block0, count);
   }
-  // Block k of the leaf over prim_index[first, first + count), padded with its last triangle.
+  // Block k of the current leaf (leaf_tris_), padded with its last triangle.
   template <int B>
-  TriBlock<B> block_of(uint32_t first, uint32_t count, uint32_t k) const {
+  TriBlock<B> block_of(uint32_t /*first*/, uint32_t count, uint32_t k) const {
     TriBlock<B> blk;
     for (uint32_t l = 0; l < uint32_t(B); ++l) {
       const uint32_t slot = std::min(k * B + l, count - 1);
-      const uint32_t tri = bvh_.prim_index[first + slot];
+      const uint32_t tri = leaf_tris_[slot];
       for (int c = 0; c < 3; ++c) {
         const Vec3 v = scene_.vertex(tri, c);
         blk.v[c][0][l] = v.x, blk.v[c][1][l] = v.y, blk.v[c][2][l] = v.z;
@@ -245,6 +254,7 @@ class Collapser {
   const MBVHBuildParams& p_;
   MBVH<N, W>& out_;
   std::vector<uint32_t> first_, count_, order_;
+  std::vector<uint32_t> leaf_tris_;  // the distinct triangles of the leaf being packed
   std::vector<std::array<double, N + 1>> F_;
   std::vector<std::array<uint8_t, N + 1>> split_;
   std::vector<uint8_t> leaf_, node_split_;

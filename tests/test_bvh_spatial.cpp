@@ -6,6 +6,7 @@
 
 #include "structures/builtin_scenes.h"
 #include "structures/bvh_spatial.h"
+#include "workloads/hard_cases.h"
 #include "test_util.h"
 
 namespace tb {
@@ -153,6 +154,35 @@ TEST(SpatialBVH, DegenerateInputs) {
   const BVH b = build_spatial_bvh(one, p, sp);
   EXPECT_EQ(b.prim_index.size(), 1u);
   EXPECT_TRUE(b.nodes[0].is_leaf());
+}
+
+}  // namespace
+}  // namespace tb
+
+namespace tb {
+namespace {
+
+// Every BVH-based scheme over a spatial-split BVH: no leak on the must-hit hard cases, and the
+// ordinary workloads match the reference, as with the plain build (tests/test_schemes.cpp).
+TEST(SpatialBVH, SchemesStayWatertight) {
+  SchemeConfig cfg;
+  cfg.params["spatial"] = "1";
+  for (const char* scene : {"room", "sphere", "sphere@148376,1234,-223423", "stadium"}) {
+    Bench bench(load_scene(scene));
+    for (const char* scheme : {"bvh_single", "bvh_ranged", "bvh_partition", "mbvh4_single", "mbvh8_single", "mbvh_rs",
+                               "cwbvh_single"}) {
+      for (const std::string& w : hard_case_names()) {
+        if (!hard_case_must_hit(w)) continue;
+        const Accuracy a = test::accuracy_of(bench, scheme, test::small_spec(w, 48), cfg);
+        EXPECT_EQ(a.false_miss, 0u) << scheme << " leaks on " << scene << " / " << w;
+      }
+      for (const char* w : {"primary", "bounce:2"}) {
+        const Accuracy a = test::accuracy_of(bench, scheme, test::small_spec(w, 48), cfg);
+        EXPECT_LE(a.mismatches, 1u) << scheme << " on " << scene << " / " << w;
+        EXPECT_EQ(a.false_miss, 0u) << scheme << " on " << scene << " / " << w;
+      }
+    }
+  }
 }
 
 }  // namespace

@@ -74,9 +74,16 @@ std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, Struct
 }
 
 ParamSpecs embree_param_specs() {
-  return {bool_param("robust", true, "RTC_SCENE_FLAG_ROBUST: Embree's watertight mode (0: its fast default)")};
+  return {bool_param("robust", true, "RTC_SCENE_FLAG_ROBUST: Embree's watertight mode (0: its fast default)"),
+          choice_param("quality", "high", {"low", "medium", "high"},
+                       "rtcSetSceneBuildQuality: low (Morton), medium (binned SAH), high (SAH; spatial splits when robust=0)")};
 }
 
 bool embree_robust(const SchemeConfig& cfg) { return cfg.get_bool("robust"); }
+
+EmbreeQuality embree_quality(const SchemeConfig& cfg) {
+  const std::string& q = cfg.get_choice("quality");
+  return q == "low" ? EmbreeQuality::low : q == "medium" ? EmbreeQuality::medium : EmbreeQuality::high;
+}
 
 }  // namespace tb

@@ -1,7 +1,9 @@
 // Embree 3 as the baseline of every comparison. One device per process (one build thread, so
-// build times compare with our single-threaded builders), scenes built at high quality, cached
-// per scene and mode. Robust mode (RTC_SCENE_FLAG_ROBUST) is the default so the baseline leaks
-// no more than our watertight kernels; `--param robust=0` gives Embree's fast default mode.
+// build times compare with our single-threaded builders), scenes built at high quality by default
+// (`--param quality=low|medium|high`), cached per scene and mode. Robust mode
+// (RTC_SCENE_FLAG_ROBUST) is the default so the baseline leaks no more than our watertight
+// kernels; `--param robust=0` gives Embree's fast default mode, the only one in which its HIGH
+// quality build makes spatial splits (Debian's Embree 3.13.5).
 #pragma once
 #include <embree3/rtcore.h>
 
@@ -32,9 +34,11 @@ class EmbreeScene {
 RTCDevice embree_device();
 std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, StructureCache& cache,
                                                       EmbreeQuality quality, bool robust);
-// The three Embree schemes' one parameter, `robust`, and its value.
+// The three Embree schemes' parameters: `robust` (0|1) and `quality` (low|medium|high; only high
+// builds spatial splits, and only in fast mode, robust=0), and their values.
 ParamSpecs embree_param_specs();
 bool embree_robust(const SchemeConfig& cfg);
+EmbreeQuality embree_quality(const SchemeConfig& cfg);
 
 inline void to_embree(const Ray& r, RTCRayHit& rh) {
   rh.ray.org_x = r.org.x; rh.ray.org_y = r.org.y; rh.ray.org_z = r.org.z;
@@ -53,12 +57,13 @@ inline Hit from_embree(const RTCRayHit& rh) {
 // Base for the three Embree schemes: config and the cached scene.
 class EmbreeTraverserBase {
  protected:
-  explicit EmbreeTraverserBase(const SchemeConfig& cfg) : robust_(embree_robust(cfg)) {}
+  explicit EmbreeTraverserBase(const SchemeConfig& cfg) : robust_(embree_robust(cfg)), quality_(embree_quality(cfg)) {}
   void prepare_embree(const Scene& scene, StructureCache& cache) {
-    scene_ = fetch_embree_scene(scene, cache, EmbreeQuality::high, robust_);
+    scene_ = fetch_embree_scene(scene, cache, quality_, robust_);
   }
   size_t embree_bytes() const { return scene_ ? scene_->bytes() : 0; }
   bool robust_;
+  EmbreeQuality quality_;
   std::shared_ptr<const EmbreeScene> scene_;
 };
 

@@ -273,6 +273,21 @@ inline bool pop_pending(const MBVHStackEntry* stack, uint32_t& sp, float tfar, u
 }
 
 
+// The 8-wide case of push_sorted on the 8 child references `refs` (the compressed layout of
+// cwbvh_single decodes its references instead of storing them).
+inline uint32_t push_sorted8(__m256i refs, __m256 tn, __m256 entered, int count, MBVHStackEntry* out) {
+  const __m256i keys = mbvh_simd::sort8(mbvh_simd::sort_keys8(tn, entered));
+  const __m256i rev = _mm256_sub_epi32(_mm256_set1_epi32(count - 1), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  const __m256i idx = _mm256_and_si256(_mm256_permutevar8x32_epi32(keys, rev), _mm256_set1_epi32(7));
+  const __m256i sorted = _mm256_permutevar8x32_epi32(refs, idx);
+  const __m256i dist = _mm256_permutevar8x32_epi32(_mm256_castps_si256(tn), idx);
+  const __m256i lo = _mm256_unpacklo_epi32(sorted, dist), hi = _mm256_unpackhi_epi32(sorted, dist);
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permute2x128_si256(lo, hi, 0x20));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out) + 1, _mm256_permute2x128_si256(lo, hi, 0x31));
+  const __m256i nearest = _mm256_and_si256(keys, _mm256_set1_epi32(7));
+  return uint32_t(_mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(refs, nearest)));
+}
+
 // Sorts the `count` (>= 3) entered children near-to-far and writes all but the nearest to
 // out[0 .. count-2], farthest first (so the second nearest ends on top); returns the nearest.
 // Writes N entries (see mbvh_traverse for why the stack always has room for them).
@@ -293,16 +308,7 @@ inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, ty
     _mm_storeu_si128(reinterpret_cast<__m128i*>(out) + 1, _mm_unpackhi_epi32(refs, dist));
     return nd.ref[uint32_t(_mm_cvtsi128_si32(keys)) & 3];
   } else {
-    const __m256i keys = mbvh_simd::sort8(mbvh_simd::sort_keys8(tn, entered));
-    const __m256i rev = _mm256_sub_epi32(_mm256_set1_epi32(count - 1), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
-    const __m256i idx = _mm256_and_si256(_mm256_permutevar8x32_epi32(keys, rev), _mm256_set1_epi32(7));
-    const __m256i refs =
-        _mm256_permutevar8x32_epi32(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)), idx);
-    const __m256i dist = _mm256_permutevar8x32_epi32(_mm256_castps_si256(tn), idx);
-    const __m256i lo = _mm256_unpacklo_epi32(refs, dist), hi = _mm256_unpackhi_epi32(refs, dist);
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permute2x128_si256(lo, hi, 0x20));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out) + 1, _mm256_permute2x128_si256(lo, hi, 0x31));
-    return nd.ref[uint32_t(_mm256_cvtsi256_si32(keys)) & 7];
+    return push_sorted8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)), tn, entered, count, out);
   }
 }
 

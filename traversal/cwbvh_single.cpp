@@ -1,0 +1,150 @@
+// cwbvh_single: single-ray traversal of the compressed 8-wide BVH (structures/cwbvh.h; Ylitie,
+// Karras and Laine 2017; CS348K lecture 18, "compression" as the first answer to incoherent rays
+// being bandwidth bound). Each node is 80 bytes instead of the MBVH8's 256: the child boxes are
+// decoded in SIMD (8-bit offsets widened to float, times the node's power-of-two cell, plus its
+// origin: exact in the cell multiply, one rounding in the add, the operations the builder checked
+// when it quantized conservatively) and fed to the kernel library's slab test with Ize's far
+// padding, so a decoded box is never smaller than the true one and robustness is the MBVH8's.
+// Children are ordered as mbvh8_single's "sort always" path orders them (bitonic network on
+// distance keys), leaves are the MBVH8's 8-wide triangle blocks under the watertight SIMD test.
+// The tree is the SAH-collapsed MBVH8 (same parameters as mbvh8_single, leaves of at most 16
+// triangles), re-laid out and quantized.
+#include "structures/cwbvh.h"
+#include "traversal/mbvh_fetch.h"
+#include "traversal/mbvh8_traverse.h"  // min_key8 (moves to mbvh_traverse.h with the kernels merge)
+
+namespace tb {
+namespace {
+
+constexpr MBVHDefaults kDefaults{4, 16, true, 0};
+
+struct CWData {
+  std::shared_ptr<const CWBVH> cw;
+};
+
+// Per-ray constants of the decoded box test: as NodeRay<8>, with the near/far choice per axis
+// expressed as which quantized array holds the near planes.
+struct CWRay {
+  __m256 o[3], rn[3], rf[3], tmin;
+  bool neg[3];  // direction sign bit: the near plane is the box's hi
+  CWRay(const RayCtx& rc, float t0) {
+    for (int a = 0; a < 3; ++a) {
+      o[a] = _mm256_set1_ps(rc.org[a]);
+      rn[a] = _mm256_set1_ps(rc.inv[a]);
+      rf[a] = _mm256_set1_ps(rc.inv[a] * kFarPad);
+      neg[a] = std::signbit(rc.inv[a]);
+    }
+    tmin = _mm256_set1_ps(t0);
+  }
+};
+
+// p + float(q) * s on 8 slots: the builder's cw_decode, lane by lane.
+[[gnu::always_inline]] inline __m256 decode8(const uint8_t* q, __m256 p, __m256 s) {
+  const __m256i qi = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q)));
+  return _mm256_add_ps(p, _mm256_mul_ps(_mm256_cvtepi32_ps(qi), s));
+}
+
+// The 8 child references of a node in the MBVH format (leaf bit, first block, triangles - 1).
+[[gnu::always_inline]] inline __m256i child_refs(const CWNode& n) {
+  const __m256i meta = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(n.meta)));
+  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  const __m256i interior = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(n.imask), bit), bit);
+  const __m256i inner = _mm256_add_epi32(_mm256_set1_epi32(int(n.child_base)), meta);
+  const __m256i block = _mm256_add_epi32(_mm256_set1_epi32(int(n.block_base)), _mm256_and_si256(meta, _mm256_set1_epi32(15)));
+  const __m256i leaf = _mm256_or_si256(_mm256_or_si256(_mm256_set1_epi32(int(mbvh_ref::kLeaf)), _mm256_slli_epi32(block, 6)),
+                                       _mm256_srli_epi32(meta, 4));
+  return _mm256_blendv_epi8(leaf, inner, interior);
+}
+
+template <class P>
+void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, MBVHStackEntry* stack, P& probe) {
+  using S = simd::V<8>;
+  const CWNode* nodes = t.nodes.data();
+  uint32_t sp = 0, cur = 0;
+  float tfar = hit.t;
+  for (;;) {
+    if (!mbvh_ref::is_leaf(cur)) {
+      const CWNode& nd = nodes[cur];
+      probe.node(&nd, sizeof(nd));
+      __m256 xn[3], xf[3];
+      for (int a = 0; a < 3; ++a) {
+        const __m256 p = _mm256_set1_ps(nd.p[a]), s = _mm256_set1_ps(cw_scale(nd.e[a]));
+        xn[a] = _mm256_sub_ps(decode8(r.neg[a] ? nd.qhi[a] : nd.qlo[a], p, s), r.o[a]);
+        xf[a] = _mm256_sub_ps(decode8(r.neg[a] ? nd.qlo[a] : nd.qhi[a], p, s), r.o[a]);
+      }
+      __m256 tn;
+      const __m256 entered = slab<8, true>(xn, xf, r.rn, r.rf, r.tmin, _mm256_set1_ps(tfar), tn);
+      const int mask = S::mask(entered);
+      if (mask) {
+        const int count = std::popcount(unsigned(mask));
+        const __m256i refs = child_refs(nd);
+        push_sorted8(refs, tn, entered, count, stack + sp);
+        if constexpr (P::enabled) {
+          for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
+        }
+        alignas(32) uint32_t ref[8];
+        _mm256_store_si256(reinterpret_cast<__m256i*>(ref), refs);
+        cur = ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
+        sp += uint32_t(count - 1);
+        continue;
+      }
+    } else {
+      probe_leaf<8>(t.blocks.data(), cur, probe, 1);
+      leaf_test<8, TriKernel::watertight>(t.blocks.data(), nullptr, tr, nullptr, cur, hit);
+      tfar = hit.t;
+    }
+    if (!pop_pending(stack, sp, tfar, cur, probe)) return;
+  }
+}
+
+class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
+ public:
+  explicit CWBVHSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)) {
+    if (params_.merge > 16) throw InputError("cwbvh_single: merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
+    if (params_.bvh.max_leaf > 16) throw InputError("cwbvh_single: leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+  }
+  std::string_view name() const override { return "cwbvh_single"; }
+  void prepare(const Scene& scene, StructureCache& cache) override {
+    const MBVHData<8, 8> m = fetch_mbvh<8, 8>(scene, cache, params_, TriKernel::watertight);
+    data_.cw = cache.get<CWBVH>(params_.key(8, 8), [&] { return CWBVH::compress(*m.mbvh); });
+  }
+  std::string structure_info() const override { return data_.cw->stats.describe(); }
+  size_t structure_bytes() const override { return data_.cw->stats.node_bytes + data_.cw->stats.tri_bytes; }
+  size_t node_bytes() const { return data_.cw->stats.node_bytes; }
+
+  template <class P>
+  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    const CWBVH& t = *data_.cw;
+    std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
+    for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
+      const Ray& ray = batch.rays[i];
+      probe.read(&ray, sizeof(Ray));
+      if constexpr (P::enabled)
+        if (probe.counts) probe.counts->rays++;
+      const RayCtx rc(ray);
+      const CWRay cr(rc, ray.tmin);
+      const TriRay<8> tr(rc, ray.tmin);
+      Hit hit = initial_hit(ray);
+      cw_traverse(t, cr, tr, hit, stack.data(), probe);
+      hits[i] = finish_hit(hit);
+      probe.write(&hits[i], sizeof(Hit));
+    }
+  }
+
+ private:
+  SchemeConfig cfg_;
+  MBVHBuildParams params_;
+  CWData data_;
+};
+
+}  // namespace
+
+std::unique_ptr<Traverser> make_cwbvh_single(const SchemeConfig& cfg) { return std::make_unique<CWBVHSingle>(cfg); }
+ParamSpecs params_cwbvh_single() {
+  ParamSpecs specs = mbvh_param_specs(kDefaults);
+  for (ParamSpec& p : specs)
+    if (p.name == "small") p = int_choice_param("small", 0, {0}, "always 0: the compressed layout holds 8-wide blocks only");
+  return specs;
+}
+
+}  // namespace tb
