@@ -292,7 +292,7 @@ int main(int argc, char** argv) {
         const std::vector<Hit> ref = reference_hits_of(bench, batch, ro.threads);
         const std::string label = "file:" + std::filesystem::path(rays_in).filename().string();
         Record r = measure_rays(bench, label, batch, ref, *t, ro, hits);
-        r.set("prepare_ms", prepare_ms);
+        r.set("prepare_ms", prepare_ms).set("view", "");  // the rays came from a file, not a camera view
         std::fprintf(stderr, "%-16s %-14s %8s Mrays/s (min %s, max %s)  mismatch %s\n", scheme_arg.c_str(),
                      label.c_str(), r.get("mrays_median")->c_str(), r.get("mrays_min")->c_str(),
                      r.get("mrays_max")->c_str(), r.get("mismatch_rate")->c_str());

@@ -403,8 +403,9 @@ void expect_matches_reference(Bench& bench, RayBatch b, const std::string& what,
   bvh->prepare(bench.scene(), bench.cache());
   const Accuracy base = compare_hits(trace_with(*bvh, b), ref);
   std::vector<Hit> first;
+  check_run_params(kKdSchemes, cfg);  // the two schemes share cfg as one run does
   for (const auto& name : kKdSchemes) {
-    auto t = make_scheme(name, cfg);
+    auto t = make_scheme(name, config_for(name, cfg));
     t->prepare(bench.scene(), bench.cache());
     const std::vector<Hit> hits = trace_with(*t, b);
     const Accuracy a = compare_hits(hits, ref);
