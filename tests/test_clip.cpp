@@ -103,72 +103,63 @@ struct Lattice {
 };
 const Lattice kLattices[] = {{0.f, 0.125f}, {1e5f, 0.125f}, {-3e5f, 0.5f}, {1e5f, 1.f / 128}};
 
+// A triangle and the clipped bounds it must give exactly, in lattice coordinates.
+struct Exact {
+  const char* what;
+  Vec3 a, b, c, lo, hi;
+};
+
+void expect_exact(const Lattice& L, const AABB& box, const Exact& e) {
+  SCOPED_TRACE(e.what);
+  auto at = [&](Vec3 v) { return L.p(v.x, v.y, v.z); };
+  const AABB got = clip_checked(at(e.a), at(e.b), at(e.c), box);
+  ASSERT_FALSE(got.empty());
+  EXPECT_EQ(got.lo, at(e.lo));
+  EXPECT_EQ(got.hi, at(e.hi));
+}
+
 TEST(Clip, TouchingOnlyAtAnEdgeOrAVertex) {
+  const Exact cases[] = {
+      {"a vertex at a corner of the box, the rest outside", {8, 8, 8}, {16, 12, 9}, {12, 16, 14}, {8, 8, 8}, {8, 8, 8}},
+      {"a vertex inside a face", {3, 5, 8}, {1, 2, 20}, {6, 7, 12}, {3, 5, 8}, {3, 5, 8}},
+      {"an edge lying in a face", {2, 3, 8}, {6, 5, 8}, {4, 4, 16}, {2, 3, 8}, {6, 5, 8}},
+      {"an edge along an edge of the box", {8, 8, 1}, {8, 8, 7}, {16, 24, 4}, {8, 8, 1}, {8, 8, 7}},
+  };
   for (const Lattice& L : kLattices) {
     SCOPED_TRACE(::testing::Message() << "offset " << L.o << " step " << L.u);
     const AABB box = L.box({0, 0, 0}, {8, 8, 8});
-    // A vertex at a corner of the box, the rest outside: the corner, exactly.
-    AABB b = clip_checked(L.p(8, 8, 8), L.p(16, 12, 9), L.p(12, 16, 14), box);
-    ASSERT_FALSE(b.empty());
-    EXPECT_EQ(b.lo, L.p(8, 8, 8));
-    EXPECT_EQ(b.hi, L.p(8, 8, 8));
-    // A vertex inside a face.
-    b = clip_checked(L.p(3, 5, 8), L.p(1, 2, 20), L.p(6, 7, 12), box);
-    ASSERT_FALSE(b.empty());
-    EXPECT_EQ(b.lo, L.p(3, 5, 8));
-    EXPECT_EQ(b.hi, L.p(3, 5, 8));
-    // An edge lying in a face, the third vertex outside: that edge's bounds.
-    b = clip_checked(L.p(2, 3, 8), L.p(6, 5, 8), L.p(4, 4, 16), box);
-    ASSERT_FALSE(b.empty());
-    EXPECT_EQ(b.lo, L.p(2, 3, 8));
-    EXPECT_EQ(b.hi, L.p(6, 5, 8));
-    // An edge along an edge of the box.
-    b = clip_checked(L.p(8, 8, 1), L.p(8, 8, 7), L.p(16, 24, 4), box);
-    ASSERT_FALSE(b.empty());
-    EXPECT_EQ(b.lo, L.p(8, 8, 1));
-    EXPECT_EQ(b.hi, L.p(8, 8, 7));
+    for (const Exact& e : cases) expect_exact(L, box, e);
     // Touching at a point that is no vertex: the triangle lies in z = 4 beyond x + y = 16 and
     // meets the box only at (8, 8, 4), where its edge crosses the box's vertical edge.
-    b = clip_checked(L.p(16, 0, 4), L.p(0, 16, 4), L.p(16, 16, 4), box);
+    const Vec3 touch = L.p(8, 8, 4);
+    const AABB b = clip_checked(L.p(16, 0, 4), L.p(0, 16, 4), L.p(16, 16, 4), box);
     ASSERT_FALSE(b.empty());
-    EXPECT_TRUE(b.lo.x <= L.p(8, 8, 4).x && b.hi.x >= L.p(8, 8, 4).x);
-    EXPECT_TRUE(b.lo.y <= L.p(8, 8, 4).y && b.hi.y >= L.p(8, 8, 4).y);
-    EXPECT_EQ(b.lo.z, L.p(8, 8, 4).z);
-    EXPECT_EQ(b.hi.z, L.p(8, 8, 4).z);
-    // The same triangles one float step outside the box do not touch it.
+    EXPECT_TRUE(b.lo.x <= touch.x && b.hi.x >= touch.x && b.lo.y <= touch.y && b.hi.y >= touch.y);
+    EXPECT_TRUE(b.lo.z == touch.z && b.hi.z == touch.z);
+    // The vertex and the edge in the face one float step outside the box do not touch it.
     const float out = std::nextafter(box.hi.z, INFINITY);
-    Vec3 v0 = L.p(3, 5, 8), v1 = L.p(1, 2, 20), v2 = L.p(6, 7, 12);
-    v0.z = out;
-    EXPECT_TRUE(clip_triangle_bounds(v0, v1, v2, box).empty());
-    Vec3 w0 = L.p(2, 3, 8), w1 = L.p(6, 5, 8);
-    w0.z = w1.z = out;
+    Vec3 v0 = L.p(3, 5, 8), w0 = L.p(2, 3, 8), w1 = L.p(6, 5, 8);
+    v0.z = w0.z = w1.z = out;
+    EXPECT_TRUE(clip_triangle_bounds(v0, L.p(1, 2, 20), L.p(6, 7, 12), box).empty());
     EXPECT_TRUE(clip_triangle_bounds(w0, w1, L.p(4, 4, 16), box).empty());
   }
 }
 
 TEST(Clip, DegenerateTriangles) {
+  const Exact cases[] = {
+      {"a point inside", {3, 4, 5}, {3, 4, 5}, {3, 4, 5}, {3, 4, 5}, {3, 4, 5}},
+      {"a point on a corner", {0, 8, 0}, {0, 8, 0}, {0, 8, 0}, {0, 8, 0}, {0, 8, 0}},
+      // Collinear vertices, one repeated or one between the others, along the box's diagonal.
+      {"a segment, repeated end", {-8, -8, -8}, {16, 16, 16}, {-8, -8, -8}, {0, 0, 0}, {8, 8, 8}},
+      {"a segment, middle vertex", {-8, -8, -8}, {16, 16, 16}, {4, 4, 4}, {0, 0, 0}, {8, 8, 8}},
+  };
   for (const Lattice& L : kLattices) {
     SCOPED_TRACE(::testing::Message() << "offset " << L.o << " step " << L.u);
     const AABB box = L.box({0, 0, 0}, {8, 8, 8});
-    // A point: inside, on a corner, outside.
-    AABB b = clip_checked(L.p(3, 4, 5), L.p(3, 4, 5), L.p(3, 4, 5), box);
-    ASSERT_FALSE(b.empty());
-    EXPECT_EQ(b.lo, L.p(3, 4, 5));
-    EXPECT_EQ(b.hi, L.p(3, 4, 5));
-    b = clip_checked(L.p(0, 8, 0), L.p(0, 8, 0), L.p(0, 8, 0), box);
-    ASSERT_FALSE(b.empty());
-    EXPECT_EQ(b.lo, L.p(0, 8, 0));
+    for (const Exact& e : cases) expect_exact(L, box, e);
     EXPECT_TRUE(clip_triangle_bounds(L.p(9, 4, 5), L.p(9, 4, 5), L.p(9, 4, 5), box).empty());
-    // A segment (collinear vertices, one repeated or one between the others) through the box
-    // along its diagonal: the whole box.
-    for (const Vec3 mid : {L.p(-8, -8, -8), L.p(4, 4, 4)}) {
-      b = clip_checked(L.p(-8, -8, -8), L.p(16, 16, 16), mid, box);
-      ASSERT_FALSE(b.empty());
-      EXPECT_EQ(b.lo, box.lo);
-      EXPECT_EQ(b.hi, box.hi);
-    }
     // A segment through the box off the diagonal: it enters at x = 0 and leaves at x = 8.
-    b = clip_checked(L.p(-4, 1, 2), L.p(12, 5, 6), L.p(4, 3, 4), box);
+    const AABB b = clip_checked(L.p(-4, 1, 2), L.p(12, 5, 6), L.p(4, 3, 4), box);
     ASSERT_FALSE(b.empty());
     EXPECT_EQ(b.lo.x, box.lo.x);
     EXPECT_EQ(b.hi.x, box.hi.x);
