@@ -41,8 +41,11 @@ int clip_polygon(Vec3 a, Vec3 b, Vec3 c, const AABB& box, ClipVert* out /* kMaxC
         const ClipVert& e = in[(i + 1) % n];
         const bool si = inside(s), ei = inside(e);
         if (si) o[m++] = s;
-        if (si != ei) {
-          // The edge crosses the plane strictly (an endpoint on the plane counts as inside).
+        // An endpoint on the plane counts as inside, and is where the edge meets the plane: it is
+        // output as it is (exact coordinates and all), not recomputed as a crossing. So a
+        // triangle touching the box only at a vertex or along an edge clips to exactly that.
+        if (si != ei && s.p[axis] != w && e.p[axis] != w) {
+          // The edge crosses the plane strictly.
           const double t = (w - s.p[axis]) / (e.p[axis] - s.p[axis]);
           ClipVert x;
           x.exact = 0;

@@ -5,8 +5,10 @@
 //
 // Robustness: Sutherland-Hodgman against the closed box in double, inclusive inside tests (a
 // triangle lying in a face, or touching the box only along an edge or at a vertex, overlaps it);
-// every coordinate that is exactly a float input (a vertex coordinate, a box plane, a coordinate
-// kept by an axis-parallel edge) stays exact, every interpolated one is widened by far more than
+// a vertex on a box plane is kept as it is, not recomputed as an edge crossing, so a triangle that
+// touches the box only at a vertex or along an edge clips to exactly that vertex or edge; every
+// coordinate that is exactly a float input (a vertex coordinate, a box plane, a coordinate kept by
+// an axis-parallel edge) stays exact, every interpolated one is widened by far more than
 // its double rounding error and rounded outward to float. The bounds can therefore only grow
 // beyond the exact clipped polygon's, never shrink, and never reach beyond the box or the
 // triangle's own bounds.

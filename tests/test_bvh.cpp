@@ -1,8 +1,12 @@
 // BVH builder invariants: every triangle in exactly one leaf, boxes nest, leaves respect the
-// size limit, refit restores tight boxes after a move.
+// size limit, refit restores tight boxes after a move; the build over a span of references (an
+// index subset with clipped boxes, as the RayGrid octree's mini-BVHs) is the scene build's code.
+#include <algorithm>
+#include <cstring>
 #include <random>
 
 #include "structures/bvh.h"
+#include "structures/clip.h"
 #include "test_util.h"
 
 namespace tb {
@@ -22,10 +26,15 @@ Scene random_triangles(uint32_t n, uint32_t seed) {
   return s;
 }
 
-void check_invariants(const Scene& s, const BVH& bvh, int max_leaf) {
-  std::vector<int> seen(s.num_triangles(), 0);
+// Every expected primitive exactly once (no other), boxes nested, each leaf's box holding its
+// primitives' boxes, leaves within the size limit. `box_of(id)` is the box the build was given.
+template <class BoxOf>
+void check_tree(const BVH& bvh, int max_leaf, const std::vector<uint32_t>& ids, BoxOf&& box_of) {
+  ASSERT_FALSE(bvh.nodes.empty());
+  std::vector<int> seen(ids.empty() ? 0 : *std::max_element(ids.begin(), ids.end()) + 1, 0);
   std::vector<uint32_t> stack{0};
   uint32_t leaves = 0;
+  size_t slots = 0;
   while (!stack.empty()) {
     const BVHNode& n = bvh.nodes[stack.back()];
     stack.pop_back();
@@ -34,9 +43,12 @@ void check_invariants(const Scene& s, const BVH& bvh, int max_leaf) {
       ++leaves;
       EXPECT_LE(int(n.count), max_leaf);
       for (uint32_t k = n.left_first; k < n.left_first + n.count; ++k) {
+        ASSERT_LT(k, bvh.prim_index.size());
         const uint32_t t = bvh.prim_index[k];
+        ASSERT_LT(t, seen.size()) << "primitive " << t << " was not given";
         seen[t]++;
-        EXPECT_TRUE(box.contains(s.triangle_bounds(t))) << "triangle " << t << " outside its leaf";
+        ++slots;
+        EXPECT_TRUE(box.contains(box_of(t))) << "primitive " << t << " outside its leaf";
       }
     } else {
       for (uint32_t c = n.left_first; c < n.left_first + 2; ++c) {
@@ -45,8 +57,18 @@ void check_invariants(const Scene& s, const BVH& bvh, int max_leaf) {
       }
     }
   }
-  for (size_t t = 0; t < seen.size(); ++t) EXPECT_EQ(seen[t], 1) << "triangle " << t;
+  std::vector<int> want(seen.size(), 0);
+  for (uint32_t t : ids) want[t] = 1;
+  for (size_t t = 0; t < seen.size(); ++t) EXPECT_EQ(seen[t], want[t]) << "primitive " << t;
+  EXPECT_EQ(slots, ids.size());
+  EXPECT_EQ(bvh.prim_index.size(), ids.size());
   EXPECT_EQ(leaves, bvh.stats.leaves);
+}
+
+void check_invariants(const Scene& s, const BVH& bvh, int max_leaf) {
+  std::vector<uint32_t> all(s.num_triangles());
+  for (uint32_t t = 0; t < all.size(); ++t) all[t] = t;
+  check_tree(bvh, max_leaf, all, [&](uint32_t t) { return s.triangle_bounds(t); });
 }
 
 TEST(BVH, InvariantsOnRandomTriangles) {
@@ -117,6 +139,77 @@ TEST(BVH, ParallelBuildAndRefitMatchSerial) {
   for (auto& v : s.positions) v = v * 0.5f;
   parallel.refit(s, 2);
   check_invariants(s, parallel, 4);
+}
+
+// The octree's use: an index subset of the scene (the triangles that touch a region), each box
+// clipped to the region. Every chosen triangle once, the leaves holding the clipped boxes, and
+// the root box their union: the region's geometry bounds, inside the region.
+TEST(BVH, SpanOfClippedBoxesOnAnIndexSubset) {
+  Scene s = random_triangles(4000, 21);
+  for (uint32_t i = 0; i < 40; ++i) {  // long triangles that cross the region's faces
+    const Vec3 a{-12.f + i * 0.6f, -11.f, 9.f - i * 0.4f}, b{11.f, 10.5f - i * 0.5f, -12.f}, c{-11.f, 12.f, 0.3f * i};
+    const uint32_t v = uint32_t(s.positions.size());
+    s.positions.insert(s.positions.end(), {a, b, c});
+    s.triangles.push_back({v, v + 1, v + 2});
+  }
+  const AABB region{{-3.f, -6.f, -2.f}, {5.f, 2.5f, 7.f}};
+  for (int leaf : {1, 4, 7}) {
+    for (int threads : {1, 2}) {
+      SCOPED_TRACE(::testing::Message() << "max_leaf " << leaf << " threads " << threads);
+      std::vector<PrimRef> refs;
+      std::vector<uint32_t> ids;
+      std::vector<AABB> clipped(s.num_triangles());
+      for (uint32_t t = 1; t < s.num_triangles(); t += 2) {  // every other triangle: a subset
+        clipped[t] = clip_triangle_bounds(s.vertex(t, 0), s.vertex(t, 1), s.vertex(t, 2), region);
+        if (clipped[t].empty()) continue;
+        refs.emplace_back(clipped[t], t);
+        ids.push_back(t);
+      }
+      ASSERT_GT(ids.size(), 200u);
+      BVHBuildParams p;
+      p.max_leaf = leaf;
+      p.threads = threads;
+      const BVH bvh = BVH::build(std::span<PrimRef>(refs), p);
+      check_tree(bvh, leaf, ids, [&](uint32_t t) { return clipped[t]; });
+      AABB all;
+      for (uint32_t t : ids) all.grow(clipped[t]);
+      EXPECT_EQ(bvh.nodes[0].lo, all.lo);
+      EXPECT_EQ(bvh.nodes[0].hi, all.hi);
+      EXPECT_TRUE(region.contains(all));
+      EXPECT_GT(bvh.stats.sah_cost, 0);
+      // The span was partitioned in place: it now lists the ids in leaf order.
+      for (size_t k = 0; k < refs.size(); ++k) EXPECT_EQ(refs[k].id(), bvh.prim_index[k]);
+    }
+  }
+}
+
+// One builder: the scene build is the span build over the scene's triangle boxes, node for node.
+TEST(BVH, SceneBuildIsTheSpanBuild) {
+  for (const char* name : {"room", "spheres:5000"}) {
+    const Scene s = make_builtin_scene(name);
+    std::vector<PrimRef> refs;
+    for (uint32_t t = 0; t < s.num_triangles(); ++t) refs.emplace_back(s.triangle_bounds(t), t);
+    const BVH a = BVH::build(s), b = BVH::build(std::span<PrimRef>(refs));
+    ASSERT_EQ(a.nodes.size(), b.nodes.size()) << name;
+    EXPECT_EQ(std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BVHNode)), 0) << name;
+    EXPECT_EQ(a.prim_index, b.prim_index) << name;
+    EXPECT_EQ(a.stats.sah_cost, b.stats.sah_cost) << name;
+  }
+}
+
+TEST(BVH, SpanOfOneOrNoReferences) {
+  std::vector<PrimRef> one{PrimRef(AABB{{1, 2, 3}, {4, 5, 6}}, 77)};
+  const BVH b = BVH::build(std::span<PrimRef>(one));
+  ASSERT_TRUE(b.nodes[0].is_leaf());
+  EXPECT_EQ(b.nodes[0].count, 1u);
+  EXPECT_EQ(b.prim_index, std::vector<uint32_t>{77});
+  EXPECT_EQ(b.nodes[0].lo, (Vec3{1, 2, 3}));
+  EXPECT_EQ(b.nodes[0].hi, (Vec3{4, 5, 6}));
+  EXPECT_EQ(one[0].box().lo, (Vec3{1, 2, 3}));
+  std::vector<PrimRef> none;
+  const BVH e = BVH::build(std::span<PrimRef>(none));
+  EXPECT_TRUE(e.prim_index.empty());
+  EXPECT_EQ(e.stats.leaves, 0u);
 }
 
 }  // namespace

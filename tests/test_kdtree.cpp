@@ -233,37 +233,6 @@ TEST(KDTree, NodeLayoutIsEightBytes) {
   EXPECT_EQ(l.count(), 9u);
 }
 
-TEST(KDTree, ClipTriangleBounds) {
-  const AABB box{{0, 0, 0}, {1, 1, 1}};
-  // A triangle through the box: clipped bounds lie in the box and in the triangle's bounds.
-  AABB b = clip_triangle_bounds({-1, 0.5f, 0.5f}, {2, 0.5f, 0.5f}, {0.5f, 3, 0.5f}, box);
-  ASSERT_FALSE(b.empty());
-  EXPECT_EQ(b.lo.x, 0.f);
-  EXPECT_EQ(b.hi.x, 1.f);
-  EXPECT_EQ(b.lo.y, 0.5f);
-  EXPECT_EQ(b.hi.y, 1.f);
-  EXPECT_EQ(b.lo.z, 0.5f);
-  EXPECT_EQ(b.hi.z, 0.5f);
-  // Lying in a face: kept whole (closed box).
-  b = clip_triangle_bounds({0.1f, 0.1f, 1}, {0.9f, 0.1f, 1}, {0.1f, 0.9f, 1}, box);
-  ASSERT_FALSE(b.empty());
-  EXPECT_EQ(b.lo.z, 1.f);
-  EXPECT_EQ(b.hi.z, 1.f);
-  // Bounding boxes overlap, the triangle does not (it lies in x + y = 2.5): a perfect split
-  // drops it, and so does a box it misses entirely.
-  EXPECT_TRUE(clip_triangle_bounds({2.5f, 0, 0.5f}, {0, 2.5f, 0.5f}, {2.5f, 0, 0.6f}, box).empty());
-  EXPECT_TRUE(clip_triangle_bounds({2, 2, 2}, {3, 2, 2}, {2, 3, 2}, box).empty());
-  // Interpolated coordinates are rounded outward: the clipped bounds stay in the box and the
-  // clipped area inside a box that holds the whole triangle is its area.
-  const Vec3 a{-0.3f, 0.1f, 0.7f}, c1{1.7f, 0.9f, 0.2f}, c2{0.4f, 1.3f, -0.6f};
-  b = clip_triangle_bounds(a, c1, c2, box);
-  ASSERT_FALSE(b.empty());
-  EXPECT_TRUE(box.contains(b));
-  const Vec3 n = cross(c1 - a, c2 - a);
-  EXPECT_NEAR(clipped_triangle_area(a, c1, c2, AABB{{-10, -10, -10}, {10, 10, 10}}), 0.5 * length(n), 1e-5);
-  EXPECT_LT(clipped_triangle_area(a, c1, c2, box), 0.5 * length(n));
-}
-
 TEST(KDTree, InvariantsOnRandomTriangles) {
   for (uint32_t seed : {1u, 2u, 3u}) {
     const Scene s = random_triangles(1500, seed, seed == 3 ? 4.f : 0.5f);

@@ -4,9 +4,13 @@
 // default and big queues and deep octrees, and on rays built to run along the octree's seams:
 // from outside the bounds, from origins on faces, edges and corners of leaves, axis-parallel
 // along shared faces (+0 and -0), through leaf corners, with tmin > 0 and short tmax.
+#include <cstring>
+#include <map>
 #include <random>
 
+#include "structures/clip.h"
 #include "structures/octree.h"
+#include "test_geometry.h"
 #include "traversal/raygrid_stats.h"
 #include "workloads/hard_cases.h"
 #include "test_util.h"
@@ -14,46 +18,7 @@
 namespace tb {
 namespace {
 
-// ---------------------------------------------------------------------------------------------
-// Independent closed triangle / closed box overlap: the separating axis theorem (Akenine-Moller
-// 2001) in double — the box's three axes, the triangle normal, and the nine edge x axis
-// crosses. Touching counts as overlap (strict separation only).
-bool sat_overlap(Vec3 a, Vec3 b, Vec3 c, const AABB& box) {
-  const double v[3][3] = {{a.x, a.y, a.z}, {b.x, b.y, b.z}, {c.x, c.y, c.z}};
-  const double lo[3] = {box.lo.x, box.lo.y, box.lo.z}, hi[3] = {box.hi.x, box.hi.y, box.hi.z};
-  for (int k = 0; k < 3; ++k) {
-    const double mn = std::min({v[0][k], v[1][k], v[2][k]}), mx = std::max({v[0][k], v[1][k], v[2][k]});
-    if (mn > hi[k] || mx < lo[k]) return false;
-  }
-  auto separated = [&](const double L[3]) {
-    if (L[0] == 0 && L[1] == 0 && L[2] == 0) return false;
-    double tmin = INFINITY, tmax = -INFINITY, bmin = INFINITY, bmax = -INFINITY;
-    for (int i = 0; i < 3; ++i) {
-      const double p = v[i][0] * L[0] + v[i][1] * L[1] + v[i][2] * L[2];
-      tmin = std::min(tmin, p), tmax = std::max(tmax, p);
-    }
-    for (int cr = 0; cr < 8; ++cr) {
-      const double p = (cr & 1 ? hi[0] : lo[0]) * L[0] + (cr & 2 ? hi[1] : lo[1]) * L[1] + (cr & 4 ? hi[2] : lo[2]) * L[2];
-      bmin = std::min(bmin, p), bmax = std::max(bmax, p);
-    }
-    return tmin > bmax || tmax < bmin;
-  };
-  double e[3][3];
-  for (int i = 0; i < 3; ++i)
-    for (int k = 0; k < 3; ++k) e[i][k] = v[(i + 1) % 3][k] - v[i][k];
-  const double n[3] = {e[0][1] * e[1][2] - e[0][2] * e[1][1], e[0][2] * e[1][0] - e[0][0] * e[1][2],
-                       e[0][0] * e[1][1] - e[0][1] * e[1][0]};
-  if (separated(n)) return false;
-  for (int i = 0; i < 3; ++i)
-    for (int k = 0; k < 3; ++k) {
-      double u[3] = {0, 0, 0};
-      u[k] = 1;
-      const double L[3] = {e[i][1] * u[2] - e[i][2] * u[1], e[i][2] * u[0] - e[i][0] * u[2],
-                           e[i][0] * u[1] - e[i][1] * u[0]};
-      if (separated(L)) return false;
-    }
-  return true;
-}
+using test::sat_overlap;
 
 Scene random_soup(uint32_t n, uint32_t seed) {
   // Small and huge triangles mixed: the huge ones cross many leaves.
@@ -217,6 +182,113 @@ TEST(Octree, AdaptsToComplexity) {
   // Without enough triangles to split, the root is the only leaf.
   p.leaf_prims = 1 << 30;
   EXPECT_EQ(Octree::build(s, p).stats.leaves, 1u);
+}
+
+// The mini-MBVHs (octree.h): each leaf's wide tree lies in its own node and block ranges, its
+// child boxes nest and hold the leaf's triangles clipped to the padded leaf (the boxes the binary
+// builder was given), every referenced triangle sits in exactly one of its leaf slots — and the
+// tree is exactly what the one builder path makes of those references: BVH::build over the span
+// of clipped boxes, then MBVH::collapse, placed by MBVH::concat.
+template <int N>
+void check_minis(const Scene& scene, const Octree& o, const MBVH<N, 4>& mini) {
+  ASSERT_EQ(mini.stats.nodes, mini.nodes.size());
+  MBVHBuildParams mp;
+  mp.bvh.bins = o.params.bins;
+  mp.bvh.max_leaf = o.params.mbvh_leaf;
+  mp.merge = o.params.merge;
+  mp.sah_collapse = N == 8;
+  mp.small = 0;
+  uint32_t next_node = 0, next_block = 0;
+  for (uint32_t l = 0; l < o.leaves.size(); ++l) {
+    const OctreeLeaf& lf = o.leaves[l];
+    if (lf.empty()) continue;
+    SCOPED_TRACE(::testing::Message() << "leaf " << l);
+    EXPECT_EQ(lf.first_node, next_node) << "leaves are laid out one after another";
+    EXPECT_EQ(lf.first_block, next_block);
+    next_node += lf.num_nodes, next_block += lf.num_blocks;
+    const OctreeNode& on = o.nodes[lf.node];
+    const AABB padded{on.lo - Vec3{o.pad, o.pad, o.pad}, on.hi + Vec3{o.pad, o.pad, o.pad}};
+    const std::vector<uint32_t> tris = o.leaf_triangles(l);  // ascending: the build's order
+    std::vector<PrimRef> refs;
+    std::map<uint32_t, AABB> clipped;
+    for (uint32_t t : tris) {
+      const AABB b = clip_triangle_bounds(scene.vertex(t, 0), scene.vertex(t, 1), scene.vertex(t, 2), padded);
+      ASSERT_FALSE(b.empty()) << "triangle " << t << " does not touch the leaf that references it";
+      clipped[t] = padded.contains(scene.triangle_bounds(t)) ? scene.triangle_bounds(t) : b;
+      refs.emplace_back(clipped[t], t);
+    }
+    // Walk: ranges, nesting, the clipped boxes in their slots, each triangle once.
+    std::map<uint32_t, int> seen;
+    std::vector<std::pair<uint32_t, AABB>> stack{{lf.mbvh_root, lf.cull}};
+    while (!stack.empty()) {
+      const auto [ni, parent] = stack.back();
+      stack.pop_back();
+      ASSERT_TRUE(ni >= lf.first_node && ni < lf.first_node + lf.num_nodes) << "node outside its leaf's range";
+      const MBVHNode<N>& n = mini.nodes[ni];
+      for (uint32_t i = 0; i < n.num_children; ++i) {
+        const AABB b = n.child_box(int(i));
+        EXPECT_TRUE(parent.contains(b)) << "child box outside its parent";
+        const uint32_t r = n.ref[i];
+        if (!mbvh_ref::is_leaf(r)) {
+          stack.push_back({r, b});
+          continue;
+        }
+        const uint32_t first = mbvh_ref::first_block(r), cnt = mbvh_ref::num_tris(r);
+        ASSERT_TRUE(first >= lf.first_block && first + (cnt + 3) / 4 <= lf.first_block + lf.num_blocks);
+        for (uint32_t k = 0; k < cnt; ++k) {
+          const uint32_t t = mini.blocks[first + k / 4].prim[k % 4];
+          ASSERT_TRUE(clipped.count(t)) << "triangle " << t << " not referenced by the leaf";
+          seen[t]++;
+          EXPECT_TRUE(b.contains(clipped[t])) << "clipped box of " << t << " outside its slot";
+        }
+      }
+    }
+    EXPECT_EQ(seen.size(), tris.size());
+    for (const auto& [t, c] : seen) EXPECT_EQ(c, 1) << "triangle " << t;
+    // The one builder path, node for node and block for block (rebased by the leaf's offsets).
+    const BVH bvh = BVH::build(std::span<PrimRef>(refs), mp.bvh);
+    EXPECT_EQ(lf.cull.lo, bvh.nodes[0].lo);
+    EXPECT_EQ(lf.cull.hi, bvh.nodes[0].hi);
+    const MBVH<N, 4> own = MBVH<N, 4>::collapse(scene, bvh, mp);
+    ASSERT_EQ(own.nodes.size(), lf.num_nodes);
+    ASSERT_EQ(own.blocks.size(), lf.num_blocks);
+    EXPECT_EQ(own.stats.max_depth, lf.mbvh_depth);
+    for (uint32_t k = 0; k < lf.num_nodes; ++k) {
+      const MBVHNode<N>& a = own.nodes[k];
+      const MBVHNode<N>& b = mini.nodes[lf.first_node + k];
+      EXPECT_EQ(std::memcmp(a.box, b.box, sizeof a.box), 0) << "node " << k;
+      ASSERT_EQ(a.num_children, b.num_children);
+      for (uint32_t i = 0; i < a.num_children; ++i) {
+        const uint32_t r = a.ref[i];
+        EXPECT_EQ(b.ref[i], mbvh_ref::is_leaf(r) ? mbvh_ref::make_leaf(mbvh_ref::first_block(r) + lf.first_block,
+                                                                       mbvh_ref::num_tris(r))
+                                                 : r + lf.first_node);
+      }
+    }
+    for (uint32_t k = 0; k < lf.num_blocks; ++k)
+      EXPECT_EQ(std::memcmp(&own.blocks[k], &mini.blocks[lf.first_block + k], sizeof(TriBlock<4>)), 0) << "block " << k;
+  }
+  EXPECT_EQ(next_node, mini.nodes.size());
+  EXPECT_EQ(next_block, mini.blocks.size());
+}
+
+TEST(Octree, MiniMBVHsComeFromTheOneBuilder) {
+  const Scene soup = random_soup(3000, 9);
+  for (int width : {4, 8}) {
+    SCOPED_TRACE(::testing::Message() << "width " << width);
+    OctreeParams p;
+    p.leaf_prims = 300;
+    p.width = width;
+    const Octree o = Octree::build(soup, p);
+    ASSERT_GT(o.leaves.size(), 8u);
+    if (width == 8) {
+      EXPECT_TRUE(o.mini.nodes.empty());
+      check_minis(soup, o, o.mini8);
+    } else {
+      EXPECT_TRUE(o.mini8.nodes.empty());
+      check_minis(soup, o, o.mini);
+    }
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
