@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "cachesim/din_trace.h"
+#include "harness/compare.h"
 #include "harness/experiment.h"
 #include "harness/tables.h"
 #include "harness/trace_runner.h"
@@ -215,6 +216,18 @@ int main(int argc, char** argv) {
   cachesim->add_option("--policy", policy, "lru | plru | bitplru")->check(kPolicy);
   cachesim->add_option("--trace", trace_path, "din trace file (- for standard input)")->required();
 
+  std::string base_csv, new_csv, compare_csv;
+  CompareOptions co;
+  auto* compare = app.add_subcommand(
+      "compare", "Compare two run CSVs cell by cell: speed ratio, Mann-Whitney U over the repetitions, accuracy deltas");
+  compare->add_option("base", base_csv, "the baseline run CSV")->required()->check(CLI::ExistingFile);
+  compare->add_option("new", new_csv, "the new run CSV")->required()->check(CLI::ExistingFile);
+  compare->add_option("--alpha", co.alpha, "significance level of the U test")->check(CLI::Range(1e-6, 0.5));
+  compare->add_option("--fail-on-regression", co.fail_on_regression_pct,
+                      "exit 3 when a cell is significantly slower by more than PCT percent")
+      ->check(CLI::Range(0.0, 100.0));
+  compare->add_option("--csv", compare_csv, "also write the comparison as CSV")->check(kOutputFile);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -232,6 +245,12 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*cachesim) return cachesim::run_cachesim_command(cache_config, policy, trace_path, std::cout);
+    if (*compare) {
+      const CompareResult r = compare_runs(read_csv(base_csv), read_csv(new_csv), co);
+      print_comparison(r, co, stdout);
+      if (!compare_csv.empty()) write_csv(compare_csv, comparison_records(r), {{"command", "compare"}, {"base", base_csv}, {"new", new_csv}});
+      return r.failed ? 3 : 0;
+    }
     apply_params(ro.scheme_config, params, kernel);
     // Parameters are checked before any scene is loaded (tables check theirs against their schemes).
     if (*run) check_run_params(expand_scheme_list(schemes_arg), ro.scheme_config);

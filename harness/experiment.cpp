@@ -85,6 +85,18 @@ Record measure_rays(const Bench& bench, const std::string& workload, const RayBa
         .set("rays_per_leaf", c.leaf_visits ? double(c.leaf_ray_visits) / double(c.leaf_visits) : 0.0);
   }
   if (opt.cache) add_cache_columns(r, scheme, batch, hits, opt.cache_config, opt.cache_policy);
+  // Every repetition's Mrays/s in run order, for `travbench compare`'s Mann-Whitney U test, and
+  // the scheme's parameters as the run gave them, so cells of runs with different parameters
+  // never match.
+  std::string samples, params;
+  for (double sec : tp.seconds) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%s%.6g", samples.empty() ? "" : ";", double(batch.size()) / std::max(sec, 1e-9) * 1e-6);
+    samples += buf;
+  }
+  for (const auto& [k, v] : config_for(std::string(scheme.name()), opt.scheme_config).params)
+    params += (params.empty() ? "" : ";") + k + "=" + v;
+  r.set("mrays_samples", samples).set("params", params);
   return r;
 }
 

@@ -135,6 +135,31 @@ TEST(CLI, RunParametersAreCheckedAgainstTheRunsSchemes) {
   std::filesystem::remove_all(dir);
 }
 
+// Two runs of the same binary compare as "same" cells; a run with another parameter set has no
+// matching cells; the regression gate and --csv work; bad files are refused.
+TEST(CLI, CompareTwoRuns) {
+  const std::string dir = test::temp_dir("cli_compare").string();
+  const std::string a = dir + "/a.csv", b = dir + "/b.csv", c = dir + "/c.csv", out = dir + "/cmp.csv";
+  const std::string run = "run --scene sphere --schemes bvh_single,mbvh8_single --workloads primary --width 32 --height 32 --reps 5 --csv ";
+  ASSERT_EQ(travbench(run + a).code, 0);
+  ASSERT_EQ(travbench(run + b).code, 0);
+  ASSERT_EQ(travbench(run + c + " --param leaf_size=8").code, 0);
+  const Result r = travbench("compare " + a + " " + b + " --csv " + out);
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("summary: 2 matched cells"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("Mann-Whitney"), std::string::npos) << r.out;
+  std::ifstream f(out);
+  std::string header;
+  std::getline(f, header);
+  for (const char* col : {"ratio", "p_value", "verdict", "delta_false_miss"})
+    EXPECT_NE(header.find(col), std::string::npos) << col << " in " << header;
+  const Result other = travbench("compare " + a + " " + c);
+  EXPECT_NE(other.out.find("only in base"), std::string::npos) << other.out;
+  EXPECT_NE(other.out.find("only in new"), std::string::npos) << other.out;
+  const Result bad = travbench("compare " + a + " " + dir + "/missing.csv");
+  EXPECT_NE(bad.code, 0);
+}
+
 TEST(CLI, BadInputGivesOneLineAndNonZeroExit) {
   const auto dir = test::temp_dir("cli_bad");
   std::ofstream(dir / "bad.bin") << "not rays";
