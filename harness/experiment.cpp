@@ -22,7 +22,7 @@ Bench::Bench(Scene scene) : scene_(std::move(scene)), cache_(scene_), reference_
 const RayBatch& Bench::rays(const WorkloadSpec& spec) {
   const std::string key = spec_key(spec);
   auto it = batches_.find(key);
-  if (it == batches_.end()) it = batches_.emplace(key, generate_workload(scene_, spec, *reference_)).first;
+  if (it == batches_.end()) it = batches_.emplace(key, generate_workload(scene_, spec, closest_hits_of(*reference_))).first;
   return it->second;
 }
 

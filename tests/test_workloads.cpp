@@ -42,8 +42,8 @@ TEST(Workloads, DeterministicAndPacketed) {
   Bench bench(make_builtin_scene("room"));
   for (const char* w : {"primary", "divergence:4", "rnd", "rnd2", "bounce:2", "shadow", "hard:inside"}) {
     const WorkloadSpec spec = test::small_spec(w, 80);
-    const RayBatch a = generate_workload(bench.scene(), spec, bench.reference());
-    const RayBatch b = generate_workload(bench.scene(), spec, bench.reference());
+    const RayBatch a = generate_workload(bench.scene(), spec, closest_hits_of(bench.reference()));
+    const RayBatch b = generate_workload(bench.scene(), spec, closest_hits_of(bench.reference()));
     ASSERT_EQ(a.size(), b.size()) << w;
     EXPECT_EQ(std::memcmp(a.rays.data(), b.rays.data(), a.size() * sizeof(Ray)), 0) << w;
     EXPECT_EQ(a.packet_begin, b.packet_begin) << w;
@@ -52,7 +52,7 @@ TEST(Workloads, DeterministicAndPacketed) {
     EXPECT_EQ(a.packet_begin.back(), a.size()) << w;
   }
   // 80x80 is not a multiple of 16: edge tiles are partial packets.
-  const RayBatch p = generate_workload(bench.scene(), test::small_spec("primary", 80), bench.reference());
+  const RayBatch p = generate_workload(bench.scene(), test::small_spec("primary", 80), closest_hits_of(bench.reference()));
   EXPECT_EQ(p.size(), 6400u);
   EXPECT_EQ(p.num_packets(), 25u);
   EXPECT_TRUE(p.common_origin);
@@ -61,9 +61,9 @@ TEST(Workloads, DeterministicAndPacketed) {
 TEST(Workloads, SeedChangesRandomRays) {
   Bench bench(make_builtin_scene("sphere"));
   WorkloadSpec s = test::small_spec("rnd2", 32);
-  const RayBatch a = generate_workload(bench.scene(), s, bench.reference());
+  const RayBatch a = generate_workload(bench.scene(), s, closest_hits_of(bench.reference()));
   s.seed = 2;
-  const RayBatch b = generate_workload(bench.scene(), s, bench.reference());
+  const RayBatch b = generate_workload(bench.scene(), s, closest_hits_of(bench.reference()));
   EXPECT_NE(std::memcmp(a.rays.data(), b.rays.data(), a.size() * sizeof(Ray)), 0);
 }
 
@@ -81,7 +81,7 @@ TEST(Workloads, DivergenceSpreadsRaysAroundTileCentre) {
 
 TEST(Workloads, BounceRaysKeepTheirPixelsPacket) {
   Bench bench(make_builtin_scene("room"));
-  const RayBatch b = generate_workload(bench.scene(), test::small_spec("bounce:1", 64), bench.reference());
+  const RayBatch b = generate_workload(bench.scene(), test::small_spec("bounce:1", 64), closest_hits_of(bench.reference()));
   EXPECT_EQ(b.depth, 1u);
   EXPECT_LE(b.num_packets(), 16u);  // 64x64 = 16 primary packets; paths only disappear
   EXPECT_GT(b.size(), 64u * 64u * 9 / 10);  // a closed room: nearly every path bounces

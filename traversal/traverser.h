@@ -80,4 +80,9 @@ class TraverserBase : public Traverser {
   }
 };
 
+// A traverser as the closest-hit function that workload generation takes (workloads/workload.h).
+inline auto closest_hits_of(const Traverser& t) {
+  return [&t](const RayBatch& b, std::span<Hit> hits) { t.trace(b, PacketRange::all(b), hits); };
+}
+
 }  // namespace tb

@@ -3,7 +3,6 @@
 #include <cmath>
 #include <numbers>
 
-#include "traversal/traverser.h"
 #include "workloads/camera.h"
 #include "workloads/hard_cases.h"
 
@@ -98,9 +97,9 @@ SurfacePoint surface_point(const Scene& s, uint32_t tri, float u, float v) {
   return sp;
 }
 
-RayBatch trace_reference(const Traverser& reference, const RayBatch& batch, std::vector<Hit>& hits) {
+RayBatch trace_reference(const ClosestHitFn& reference, const RayBatch& batch, std::vector<Hit>& hits) {
   hits.assign(batch.size(), Hit{});
-  reference.trace(batch, PacketRange::all(batch), hits);
+  reference(batch, hits);
   return batch;
 }
 
@@ -156,7 +155,7 @@ RayBatch random_rays(const Scene& scene, const WorkloadSpec& spec, bool random_o
 // k-th diffuse bounce of camera paths (§5.2.3): primary rays, then k cosine-weighted bounces
 // traced with the reference; paths that leave the scene stop. With shadow = true, returns rays
 // from the primary hit points to a point light instead.
-RayBatch path_rays(const Scene& scene, const WorkloadSpec& spec, const Traverser& reference, int k, bool shadow) {
+RayBatch path_rays(const Scene& scene, const WorkloadSpec& spec, const ClosestHitFn& reference, int k, bool shadow) {
   RayBatch cur = primary_rays(scene, spec, 1.f);
   std::vector<uint32_t> packet_of(cur.size());
   for (uint32_t p = 0; p < cur.num_packets(); ++p)
@@ -223,7 +222,7 @@ RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float diverg
   return b;
 }
 
-RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const Traverser& reference) {
+RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const ClosestHitFn& reference) {
   RayBatch b;
   if (spec.kind == "primary") b = primary_rays(scene, spec, 1.f);
   else if (spec.kind == "divergence") b = primary_rays(scene, spec, float(spec.param));

@@ -1,6 +1,8 @@
 // Generated ray workloads of controlled divergence (thesis §3.4, §5.2.3, §6.2.1).
 #pragma once
 #include <cstdint>
+#include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -9,7 +11,10 @@
 
 namespace tb {
 
-class Traverser;
+// Closest hits of every ray of a batch (hits[i] for batch.rays[i]). Workloads that follow paths
+// (bounce, shadow) trace them with the reference through this, so workloads/ needs nothing from
+// traversal/ (layers point down; harness/ passes the reference scheme in).
+using ClosestHitFn = std::function<void(const RayBatch&, std::span<Hit>)>;
 
 struct WorkloadSpec {
   std::string kind;   // primary, divergence, rnd, rnd2, bounce, shadow, hard:*
@@ -25,9 +30,10 @@ struct WorkloadSpec {
 WorkloadSpec parse_workload(const std::string& text);
 std::vector<std::string> workload_names();
 
-// Generates the rays. Bounce and shadow workloads trace their paths with `reference`
-// (prepared on this scene); the others ignore it. Deterministic given the spec (seed included).
-RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const Traverser& reference);
+// Generates the rays. Bounce and shadow workloads trace their paths with `reference` (the
+// reference scheme prepared on this scene); the others ignore it. Deterministic given the spec
+// (seed included).
+RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const ClosestHitFn& reference);
 
 // Primary rays in 16x16 packets, Fig. 16 layout (thesis §3.3): each packet is four 8x8 quadrants
 // of 64 rays, each quadrant sixteen 2x2 groups. D scales the angle between adjacent rays of a
