@@ -221,6 +221,7 @@ Hit finish(const Ray& ray, const Cand& best, Vec3 A, Vec3 B, Vec3 C) {
     exact_td(ray, A, B, C, T, D);
     t = round_to_float(mpq_class(T / D));
   }
+  t += 0.f;  // a rational zero has no sign: report +0 (-0 + 0 = +0)
   return Hit{t, best.prim, float(best.u), float(best.v)};
 }
 
