@@ -2,8 +2,8 @@
 // (traversal/exact.h). A hit matches when both miss, or both hit with
 // |t - t_ref| <= 1e-5 * max(1, t_ref): a different primitive at the same distance (shared edge or
 // vertex) still matches. Every disagreement counts in mismatch_rate and in exactly one kind:
-// ambiguous (the exact answer flips, towards the scheme's, when the ray moves by a few float ulps:
-// ExactOracle::ambiguous), else false_miss (a leak), false_hit, or wrong_t (both hit, at another
+// ambiguous (each triangle decision the scheme made differently flips when the ray moves by a few
+// float ulps: ExactOracle::ambiguous), else false_miss (a leak), false_hit, or wrong_t (both hit, at another
 // distance: another surface or a wrong t).
 #pragma once
 #include <cmath>
@@ -15,9 +15,11 @@
 
 namespace tb {
 
+inline constexpr float kDistanceBar = 1e-5f;  // relative, on max(1, t_ref)
+
 inline bool hits_match(const Hit& h, const Hit& ref) {
   if (!h.hit() || !ref.hit()) return h.hit() == ref.hit();
-  return std::fabs(h.t - ref.t) <= 1e-5f * std::max(1.f, ref.t);
+  return std::fabs(h.t - ref.t) <= kDistanceBar * std::max(1.f, ref.t);
 }
 
 struct Accuracy {

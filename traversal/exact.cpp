@@ -19,6 +19,7 @@
 
 #include <gmpxx.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -277,51 +278,67 @@ ExactOracle::ExactOracle(const Scene& scene, StructureCache& cache)
 
 ExactOracle::ExactOracle(const Scene& scene, std::shared_ptr<const BVH> bvh) : scene_(&scene), bvh_(std::move(bvh)) {}
 
-Hit ExactOracle::closest(const Ray& ray, uint64_t* tri_tests) const {
-  if (!ray_valid(ray) || !(ray.tmin < ray.tmax) || bvh_->nodes.empty()) return Hit{};
+namespace {
+
+// Depth-first over the BVH, nearer child first; `f(cand)` sees every triangle the rule accepts in
+// [tmin, tfar] and may shrink tfar (boxes beyond it are culled, inclusive).
+template <class F>
+void traverse(const BVH& bvh, const Scene& scene, const Ray& ray, double& tfar, uint64_t* tri_tests, F&& f) {
+  if (bvh.nodes.empty()) return;
   const DRay r(ray);
-  const BVHNode* nodes = bvh_->nodes.data();
-  Cand best;
-  double tfar = ray.tmax, lo, tnear;
+  const BVHNode* nodes = bvh.nodes.data();
+  double tnear, t0, t1;
   std::vector<uint32_t> stack;
   stack.reserve(64);
-  if (!box_hit(r, nodes[0], ray.tmin, tfar, tnear)) return Hit{};
   stack.push_back(0);
   while (!stack.empty()) {
-    const uint32_t ni = stack.back();
+    const BVHNode& n = nodes[stack.back()];
     stack.pop_back();
-    const BVHNode& n = nodes[ni];
     if (!box_hit(r, n, ray.tmin, tfar, tnear)) continue;
     if (n.is_leaf()) {
       for (uint32_t k = n.left_first; k < n.left_first + n.count; ++k) {
-        const uint32_t prim = bvh_->prim_index[k];
+        const uint32_t prim = bvh.prim_index[k];
         if (tri_tests) ++*tri_tests;
         Cand c;
-        if (!tri_candidate(ray, scene_->vertex(prim, 0), scene_->vertex(prim, 1), scene_->vertex(prim, 2), c))
-          continue;
+        if (!tri_candidate(ray, scene.vertex(prim, 0), scene.vertex(prim, 1), scene.vertex(prim, 2), c)) continue;
         c.prim = prim;
-        if (closer(ray, *scene_, c, best)) {
-          best = c;
-          t_bounds(best, lo, tfar);  // an equal exact t of a lower id must still be found: inclusive
-          if (tfar > ray.tmax) tfar = ray.tmax;
-        }
+        f(c);
       }
       continue;
     }
-    double t0, t1;
     const bool h0 = box_hit(r, nodes[n.left_first], ray.tmin, tfar, t0);
     const bool h1 = box_hit(r, nodes[n.left_first + 1], ray.tmin, tfar, t1);
-    auto push = [&](uint32_t i) { stack.push_back(i); };
     if (h0 && h1) {  // nearer child on top
-      if (t0 <= t1) push(n.left_first + 1), push(n.left_first);
-      else push(n.left_first), push(n.left_first + 1);
-    } else if (h0) {
-      push(n.left_first);
-    } else if (h1) {
-      push(n.left_first + 1);
+      stack.push_back(t0 <= t1 ? n.left_first + 1 : n.left_first);
+      stack.push_back(t0 <= t1 ? n.left_first : n.left_first + 1);
+    } else if (h0 || h1) {
+      stack.push_back(h0 ? n.left_first : n.left_first + 1);
     }
   }
+}
+
+}  // namespace
+
+Hit ExactOracle::closest(const Ray& ray, uint64_t* tri_tests) const {
+  if (!ray_valid(ray) || !(ray.tmin < ray.tmax)) return Hit{};
+  Cand best;
+  double tfar = ray.tmax, lo;
+  traverse(*bvh_, *scene_, ray, tfar, tri_tests, [&](const Cand& c) {
+    if (!closer(ray, *scene_, c, best)) return;
+    best = c;
+    t_bounds(best, lo, tfar);  // an equal exact t of a lower id must still be found: inclusive
+    if (tfar > ray.tmax) tfar = ray.tmax;
+  });
   return finish_closest(ray, *scene_, best);
+}
+
+std::vector<Hit> ExactOracle::all_hits(const Ray& ray) const {
+  std::vector<Hit> out;
+  if (!ray_valid(ray) || !(ray.tmin < ray.tmax)) return out;
+  double tfar = ray.tmax;
+  traverse(*bvh_, *scene_, ray, tfar, nullptr, [&](const Cand& c) { out.push_back(finish_closest(ray, *scene_, c)); });
+  std::sort(out.begin(), out.end(), [](const Hit& a, const Hit& b) { return a.t < b.t || (a.t == b.t && a.prim < b.prim); });
+  return out;
 }
 
 Hit ExactOracle::closest_brute_force(const Ray& ray) const {
@@ -342,30 +359,113 @@ float step_ulps(float x, int k) {
   for (int i = 0; i < std::abs(k); ++i) x = std::nextafter(x, to);
   return x;
 }
-}  // namespace
 
-bool ExactOracle::ambiguous(const Ray& ray, const Hit& exact, const std::function<bool(const Hit&)>& agrees,
-                            int k) const {
-  auto flips_to_agreement = [&](const Ray& moved) {
-    const Hit h = closest(moved);
-    const bool changed = h.hit() != exact.hit() || (h.hit() && h.prim != exact.prim);
-    return changed && agrees(h);
-  };
+std::vector<Ray> moved_rays(const Ray& ray, int k) {
+  std::vector<Ray> out;
   auto comp = [](Ray& r, int i) -> float& { return i < 3 ? r.org[i] : r.dir[i - 3]; };
-  // Each of the six components alone by +-1 and +-k ulps.
-  for (int i = 0; i < 6; ++i)
+  for (int i = 0; i < 6; ++i)  // each of the six components alone by +-1 and +-k ulps
     for (int s : {1, -1, k, -k}) {
       Ray m = ray;
       comp(m, i) = step_ulps(comp(m, i), s);
-      if (flips_to_agreement(m)) return true;
+      out.push_back(m);
     }
-  // All six together by +-k ulps in every sign pattern.
-  for (int mask = 0; mask < 64; ++mask) {
+  for (int mask = 0; mask < 64; ++mask) {  // all six together by +-k ulps in every sign pattern
     Ray m = ray;
     for (int i = 0; i < 6; ++i) comp(m, i) = step_ulps(comp(m, i), (mask >> i) & 1 ? k : -k);
-    if (flips_to_agreement(m)) return true;
+    out.push_back(m);
   }
-  return false;
+  return out;
+}
+
+// Whether the ray passes inside the triangle up to k float roundings of each edge function: for
+// one orientation every edge value U, V, W is >= -k 2^-24 M, M its magnitude (the sum of the
+// absolute values of its products), i.e. a float evaluation a few ulps off accepts it. This is
+// how a ray nearly in the plane of a triangle (edge-on: every edge value tiny) is recognised,
+// where moving the ray by ulps sweeps the plane crossing far along the plane. Approximate (double)
+// on purpose: it classifies, it never decides a hit.
+bool inside_within_roundings(const Ray& ray, Vec3 A, Vec3 B, Vec3 C, int k) {
+  double a[3], b[3], c[3], d[3];
+  for (int i = 0; i < 3; ++i)
+    a[i] = double(A[i]) - ray.org[i], b[i] = double(B[i]) - ray.org[i], c[i] = double(C[i]) - ray.org[i],
+    d[i] = ray.dir[i];
+  auto edge = [&](const double* p, const double* q, double& mag) {
+    double v = 0;
+    mag = 0;
+    for (int i = 0; i < 3; ++i) {
+      const int j = (i + 1) % 3, l = (i + 2) % 3;
+      v += d[i] * (p[j] * q[l] - p[l] * q[j]);
+      mag += std::fabs(d[i]) * (std::fabs(p[j] * q[l]) + std::fabs(p[l] * q[j]));
+    }
+    return v;
+  };
+  double mu, mv, mw;
+  const double u = edge(b, c, mu), v = edge(c, a, mv), w = edge(a, b, mw);
+  const double tol = k * 0x1p-24;
+  bool inside = false;
+  for (double s : {1.0, -1.0}) inside |= s * u >= -tol * mu && s * v >= -tol * mv && s * w >= -tol * mw;
+  if (!inside) return false;
+  // And the plane crossing in [tmin, tmax) up to roundings, unless the ray is edge-on.
+  const double D = u + v + w;
+  if (std::fabs(D) <= tol * (mu + mv + mw)) return true;
+  const double T = a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) + a[2] * (b[0] * c[1] - b[1] * c[0]);
+  const double t = T / D, slack = tol * (std::fabs(t) + 1);
+  return t >= ray.tmin - slack && t < double(ray.tmax) + slack;
+}
+
+}  // namespace
+
+bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, int k) const {
+  auto bar = [&](float t) { return rel_bar * std::max(1.f, t); };
+  const std::vector<Ray> moves = moved_rays(ray, k);
+  // (1) Every surface the exact ray hits before the scheme's answer (all of them for a scheme
+  // miss) must be escaped by some moved ray. A surface is the group of hits within the bar of each
+  // other (both triangles at a shared edge or vertex). Escaping means no hit from the window's
+  // start on, or a first hit beyond the window on a primitive outside the group: the neighbour
+  // across an edge at the same distance does not count (a leak through a shared edge is a leak).
+  Ray before = ray;
+  if (scheme.hit()) before.tmax = std::min(ray.tmax, scheme.t - bar(scheme.t));
+  const std::vector<Hit> hs = all_hits(before);
+  for (size_t i = 0; i < hs.size();) {
+    size_t j = i + 1;
+    while (j < hs.size() && hs[j].t - hs[j - 1].t <= bar(hs[j - 1].t)) ++j;
+    const float lo = hs[i].t - bar(hs[i].t), hi = hs[j - 1].t + bar(hs[j - 1].t);
+    auto in_group = [&](uint32_t p) {
+      for (size_t g = i; g < j; ++g)
+        if (hs[g].prim == p) return true;
+      return false;
+    };
+    bool escapes = false;
+    for (const Ray& m : moves) {
+      Ray w = m;
+      w.tmin = std::max(ray.tmin, lo);
+      const Hit x = closest(w);
+      if (!x.hit() || (!in_group(x.prim) && x.t > hi)) {
+        escapes = true;
+        break;
+      }
+    }
+    if (!escapes) return false;
+    i = j;
+  }
+  // (2) The scheme's own hit: made by the exact ray at that distance, or within k float roundings
+  // of the triangle's edge functions, or by some moved ray (on that triangle, or on any at that
+  // distance).
+  if (scheme.hit() && scheme.prim < scene_->num_triangles()) {
+    const Vec3 a = scene_->vertex(scheme.prim, 0), b = scene_->vertex(scheme.prim, 1), c = scene_->vertex(scheme.prim, 2);
+    float t;
+    if (exact_triangle_hit(ray, a, b, c, &t)) return std::fabs(scheme.t - t) <= bar(t);  // else a wrong t
+    if (inside_within_roundings(ray, a, b, c, k)) return true;
+    // Moved rays: the same triangle, or another at the same distance (the fan around a vertex).
+    for (const Ray& m : moves) {
+      if (exact_triangle_hit(m, a, b, c)) return true;
+      Ray w = m;
+      w.tmin = std::max(ray.tmin, scheme.t - bar(scheme.t));
+      w.tmax = std::min(ray.tmax, std::nextafter(scheme.t + bar(scheme.t), INFINITY));
+      if (closest(w).hit()) return true;
+    }
+    return false;
+  }
+  return true;
 }
 
 }  // namespace tb

@@ -6,8 +6,8 @@
 // exact arithmetic on the stored floats. The `reference` scheme is this oracle.
 #pragma once
 #include <cstdint>
-#include <functional>
 #include <memory>
+#include <vector>
 
 #include "structures/bvh.h"
 #include "structures/scene.h"
@@ -37,11 +37,15 @@ class ExactOracle {
   Hit closest(const Ray& ray, uint64_t* tri_tests = nullptr) const;
   // The same without any structure: every triangle, for cross-checks.
   Hit closest_brute_force(const Ray& ray) const;
-  // Whether the exact answer flips within k float ulps (docs/ACCURACY.md "Ambiguous"): some ray
-  // whose origin and direction components are each moved by 0, +-1 or +-k ulps has an exact
-  // answer different from `exact` (another primitive, or hit <-> miss) for which `agrees` holds.
-  bool ambiguous(const Ray& ray, const Hit& exact, const std::function<bool(const Hit&)>& agrees,
-                 int k = kAmbiguityUlps) const;
+  // Every hit the rule accepts in [tmin, tmax), t rounded to float, sorted by (t, prim).
+  std::vector<Hit> all_hits(const Ray& ray) const;
+  // Whether a disagreement of `scheme` with the exact answer is ambiguous (docs/ACCURACY.md
+  // "Error kinds"): each triangle decision the scheme made differently flips within a few float
+  // ulps of the ray. The moved rays: each origin and direction component alone by +-1 and +-k
+  // ulps, and all six by +-k in every sign pattern. (1) every surface the exact ray hits before
+  // the scheme's answer is escaped by some moved ray; (2) the scheme's own hit is made by the exact
+  // ray at that distance or by some moved ray. `rel_bar`: the accuracy bar, |dt| <= rel_bar max(1, t).
+  bool ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, int k = kAmbiguityUlps) const;
   static constexpr int kAmbiguityUlps = 4;
 
   const Scene& scene() const { return *scene_; }
