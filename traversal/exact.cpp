@@ -417,6 +417,30 @@ bool inside_within_roundings(const Ray& ray, Vec3 A, Vec3 B, Vec3 C, int k) {
 bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, int k) const {
   auto bar = [&](float t) { return rel_bar * std::max(1.f, t); };
   const std::vector<Ray> moves = moved_rays(ray, k);
+  auto hit_flips = [&](Vec3 a, Vec3 b, Vec3 c) {
+    if (inside_within_roundings(ray, a, b, c, k)) return true;
+    // Moved rays: the same triangle, or another at the same distance (the fan around a vertex).
+    for (const Ray& m : moves) {
+      if (exact_triangle_hit(m, a, b, c)) return true;
+      Ray w = m;
+      w.tmin = std::max(ray.tmin, scheme.t - bar(scheme.t));
+      w.tmax = std::min(ray.tmax, std::nextafter(scheme.t + bar(scheme.t), INFINITY));
+      if (closest(w).hit()) return true;
+    }
+    return false;
+  };
+  // (2), first as it is cheap: the scheme's own hit is made by the exact ray at that distance, or
+  // lies within k float roundings of the triangle's edge functions, or is made by some moved ray
+  // (on that triangle, or on any at that distance).
+  if (scheme.hit() && scheme.prim < scene_->num_triangles()) {
+    const Vec3 a = scene_->vertex(scheme.prim, 0), b = scene_->vertex(scheme.prim, 1), c = scene_->vertex(scheme.prim, 2);
+    float t;
+    if (exact_triangle_hit(ray, a, b, c, &t)) {
+      if (std::fabs(scheme.t - t) > bar(t)) return false;  // the right triangle at a wrong t
+    } else if (!hit_flips(a, b, c)) {
+      return false;
+    }
+  }
   // (1) Every surface the exact ray hits before the scheme's answer (all of them for a scheme
   // miss) must be escaped by some moved ray. A surface is the group of hits within the bar of each
   // other (both triangles at a shared edge or vertex). Escaping means no hit from the window's
@@ -446,24 +470,6 @@ bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, in
     }
     if (!escapes) return false;
     i = j;
-  }
-  // (2) The scheme's own hit: made by the exact ray at that distance, or within k float roundings
-  // of the triangle's edge functions, or by some moved ray (on that triangle, or on any at that
-  // distance).
-  if (scheme.hit() && scheme.prim < scene_->num_triangles()) {
-    const Vec3 a = scene_->vertex(scheme.prim, 0), b = scene_->vertex(scheme.prim, 1), c = scene_->vertex(scheme.prim, 2);
-    float t;
-    if (exact_triangle_hit(ray, a, b, c, &t)) return std::fabs(scheme.t - t) <= bar(t);  // else a wrong t
-    if (inside_within_roundings(ray, a, b, c, k)) return true;
-    // Moved rays: the same triangle, or another at the same distance (the fan around a vertex).
-    for (const Ray& m : moves) {
-      if (exact_triangle_hit(m, a, b, c)) return true;
-      Ray w = m;
-      w.tmin = std::max(ray.tmin, scheme.t - bar(scheme.t));
-      w.tmax = std::min(ray.tmax, std::nextafter(scheme.t + bar(scheme.t), INFINITY));
-      if (closest(w).hit()) return true;
-    }
-    return false;
   }
   return true;
 }
