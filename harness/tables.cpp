@@ -101,10 +101,10 @@ int accuracy_table(const TableOptions& opt) {
           r.set("kernel", var.label).set("offset", scene_name == base ? "0" : scene_name.substr(base.size() + 1));
           r.set("must_hit", hard_case_must_hit(w) ? "yes" : "no");
           if (opt.run.progress)
-            std::fprintf(stderr, "%-40s %-16s %-14s %-14s %8s Mrays/s  mismatch %s  leaks %s\n",
+            std::fprintf(stderr, "%-40s %-16s %-14s %-14s %8s Mrays/s  mismatch %s  leaks %s  ambiguous %s\n",
                          bench.scene().name.c_str(), scheme.c_str(), var.label.c_str(), w.c_str(),
                          r.get("mrays_median")->c_str(), r.get("mismatch_rate")->c_str(),
-                         r.get("false_miss")->c_str());
+                         r.get("false_miss")->c_str(), r.get("ambiguous")->c_str());
           records.push_back(std::move(r));
         }
       }
@@ -112,7 +112,7 @@ int accuracy_table(const TableOptions& opt) {
   }
   write_csv(opt.csv, records, {{"command", "table accuracy"}, {"scene", base}, {"seed", opt.run.seed}});
   print_table(records, {"offset", "scheme", "kernel", "workload", "mrays_median", "mismatch_rate", "false_miss",
-                        "false_hit"}, stdout);
+                        "false_hit", "wrong_t", "ambiguous"}, stdout);
   return 0;
 }
 

@@ -91,15 +91,42 @@ def plot_run(path):
     finish(fig, ax, path.with_suffix(".png"), f"{scene}: throughput per workload (1 thread, median)", "Mrays/s")
 
 
+ERROR_KINDS = [("false_miss", "tab:red"), ("false_hit", "tab:orange"), ("wrong_t", "tab:purple"),
+               ("ambiguous", "tab:gray")]
+
+
+def error_kind_panel(ax, rows, title):
+    """Stacked bars per kernel: each error kind (docs/ACCURACY.md) as a fraction of all rays."""
+    kernels = list(dict.fromkeys(r["kernel"] for r in rows))
+    bottom = [0.0] * len(kernels)
+    for kind, c in ERROR_KINDS:
+        vals = []
+        for k in kernels:
+            kr = [r for r in rows if r["kernel"] == k]
+            rays = sum(num(r, "rays") for r in kr)
+            n = sum(0.0 if math.isnan(num(r, kind)) else num(r, kind) for r in kr)
+            vals.append(n / rays if rays else 0.0)
+        ax.bar(range(len(kernels)), vals, 0.7, bottom=bottom, color=c, label=kind)
+        bottom = [b + v for b, v in zip(bottom, vals)]
+    ax.set_xticks(range(len(kernels)))
+    ax.set_xticklabels(kernels, rotation=20, fontsize=8)
+    ax.set_title(title, fontsize=9)
+    ax.set_ylabel("fraction of rays (all schemes, workloads)", fontsize=8)
+    ax.grid(alpha=0.3, axis="y")
+
+
 def plot_accuracy(path):
-    """One panel per workload: Mrays/s against mismatch rate, colour = scheme, marker = kernel."""
-    rows = [r for r in read(path) if r.get("offset", "0") == "0"]
+    """One panel per workload: Mrays/s against mismatch rate, colour = scheme, marker = kernel;
+    a last row splits the disagreements into error kinds per kernel and offset."""
+    all_rows = read(path)
+    rows = [r for r in all_rows if r.get("offset", "0") == "0"]
     workloads = list(dict.fromkeys(r["workload"] for r in rows))
+    offsets = list(dict.fromkeys(r.get("offset", "0") for r in all_rows))
     markers = {"watertight": "o", "moller": "s", "plane": "^", "plane_rcp": "v", "embree_robust": "D",
                "embree_default": "P"}
     cols = 4
     nrows = (len(workloads) + cols - 1) // cols
-    fig, axes = plt.subplots(nrows, cols, figsize=(16, 3.2 * nrows), squeeze=False)
+    fig, axes = plt.subplots(nrows + 1, cols, figsize=(16, 3.2 * (nrows + 1)), squeeze=False)
     for ax, w in zip(axes.flat, workloads):
         for r in (r for r in rows if r["workload"] == w):
             ax.scatter(num(r, "mrays_median"), max(num(r, "mismatch_rate"), 1e-6), color=colour(r["scheme"]),
@@ -109,17 +136,23 @@ def plot_accuracy(path):
         ax.axhline(1e-5, color="red", lw=0.8, ls="--")
         ax.set_title(w, fontsize=9)
         ax.grid(alpha=0.3)
-    for ax in axes.flat[len(workloads):]:
+    for ax in list(axes.flat)[len(workloads):]:
         ax.axis("off")
-    for ax in axes[:, 0]:
+    for ax in axes[:nrows, 0]:
         ax.set_ylabel("mismatch rate (floor = 0)")
-    for ax in axes[-1]:
+    for ax in axes[nrows - 1]:
         ax.set_xlabel("Mrays/s")
+    for ax, off in zip(axes[nrows], offsets):
+        ax.axis("on")
+        error_kind_panel(ax, [r for r in all_rows if r.get("offset", "0") == off], f"error kinds, offset {off}")
+    if offsets:
+        axes[nrows][0].legend(fontsize=7)
     handles = [plt.Line2D([], [], marker="o", color=colour(s), linestyle="") for s in ordered(r["scheme"] for r in rows)]
     labels = ordered(r["scheme"] for r in rows)
     handles += [plt.Line2D([], [], marker=m, color="gray", linestyle="") for m in markers.values()]
     labels += list(markers)
-    fig.suptitle(f"{rows[0]['scene'] if rows else ''}: speed vs error per workload (red: 1e-5 accuracy bar)")
+    fig.suptitle(f"{rows[0]['scene'] if rows else ''}: speed vs error per workload (red: 1e-5 accuracy bar); "
+                 "error kinds vs the exact reference")
     fig.tight_layout(rect=(0, 0, 0.87, 1))
     fig.legend(handles, labels, loc="center right", fontsize=7, ncol=1)
     fig.savefig(path.with_suffix(".png"), dpi=100)
