@@ -53,7 +53,7 @@ std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, in
   return ref;
 }
 
-Record measure_rays(const Bench& bench, const std::string& workload, const RayBatch& batch,
+Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& batch,
                     const std::vector<Hit>& ref, Traverser& scheme, const RunOptions& opt, std::vector<Hit>& hits) {
   hits.assign(batch.size(), Hit{});
   const ThroughputStats tp = measure(scheme, batch, hits, opt.threads, opt.reps);

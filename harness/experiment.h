@@ -52,7 +52,7 @@ std::string spec_key(const WorkloadSpec& s);
 Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt);
 // The same for rays from elsewhere (`travbench trace` of a ray file): `ref` are the reference's
 // hits on `batch`, `workload` labels the row, `hits` receives the scheme's hits.
-Record measure_rays(const Bench& bench, const std::string& workload, const RayBatch& batch,
+Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& batch,
                     const std::vector<Hit>& ref, Traverser& scheme, const RunOptions& opt, std::vector<Hit>& hits);
 // The reference's hits on a batch that is not one of the bench's workloads.
 std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, int threads);
