@@ -260,6 +260,7 @@ template <int L>
   const f e1x = S::set1(e1.x), e1y = S::set1(e1.y), e1z = S::set1(e1.z);
   const f e2x = S::set1(e2.x), e2y = S::set1(e2.y), e2z = S::set1(e2.z);
   const f zero = S::zero(), one = S::set1(1.f);
+  t = u = v = zero;  // defined on every lane, also when no lane hits
   // p = cross(d, e2), det = dot(e1, p)
   const f px = S::sub(S::mul(d[1], e2z), S::mul(d[2], e2y));
   const f py = S::sub(S::mul(d[2], e2x), S::mul(d[0], e2z));
@@ -312,6 +313,7 @@ template <int L, bool kApproxRcp>
   using S = simd::V<L>;
   using f = typename S::f;
   const f zero = S::zero(), one = S::set1(1.f);
+  t = u = v = zero;  // defined on every lane, also when no lane hits
   const f dn = plane_offset<L>(d, tri.n);
   ok = S::and_(ok, S::neq(dn, zero));
   if (!S::any(ok)) return ok;

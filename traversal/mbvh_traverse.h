@@ -306,13 +306,37 @@ inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, ty
   }
 }
 
+// The smallest of 8 sort keys (mbvh_simd::sort_keys8: distance bits with the child index in the
+// low 3 bits; misses are the largest key): three shuffle + min steps.
+inline uint32_t min_key8(__m256i k) {
+  k = _mm256_min_epi32(k, _mm256_permute2x128_si256(k, k, 0x01));
+  k = _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(1, 0, 3, 2)));
+  k = _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)));
+  return uint32_t(_mm256_cvtsi256_si32(k));
+}
+
+// How mbvh_traverse orders the entered children of a node (a template parameter of the one loop,
+// as madmann91/bvh v2 makes its variants, rather than a copy of the loop per variant).
+//  branching: one hit child is entered directly, two are compared, three or more are sorted with
+//    the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8).
+//  sort_always (N = 8): every node with an entered child takes the same path: the bitonic network
+//    sorts the keys and pushes all but the nearest (push_sorted; with one child it pushes nothing),
+//    and the nearest comes from a three-step min reduction of the unsorted keys (min_key8), so the
+//    next node's address does not wait for the whole network. With 8 children the count varies
+//    from node to node and the branches of `branching`, plus the data-dependent compare of its
+//    two-child case, mispredict often. Measured on bounce:2 (512x512, 7 reps, median, ratio to
+//    embree_single): +4 to +13% over `branching` for mbvh8_single (8-wide blocks, watertight) on
+//    the nine scenes of /work/shared/scenes (docs/PERFORMANCE.md). The "sort always" child
+//    ordering discussed by Wald et al. (2008) and Ernst & Greiner (2008) for 4-wide nodes, with the
+//    keys of thesis Alg. 2.10.
+enum class ChildOrder { branching, sort_always };
+
 // Ordered single-ray traversal (thesis Alg. 2.8 with front-to-back order): the N children are
-// tested at once; one hit child is entered directly, two are compared, three or more are sorted
-// with the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8); the nearest is entered
-// and the others are pushed far-to-near with their entry distances. Starts at `start` (the root,
-// or a subtree when mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries
-// (at depth d at most (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
-template <int N, int W, TriKernel K, class P>
+// tested at once, the entered ones ordered as `O` says; the nearest is entered and the others are
+// pushed far-to-near with their entry distances. Starts at `start` (the root, or a subtree when
+// mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries (at depth d at most
+// (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
 inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
                           const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
   using S = simd::V<N>;
@@ -326,7 +350,19 @@ inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const Node
       typename S::f tn;
       const auto entered = box_test<N>(nd, nr, tfar, tn);
       int mask = S::mask(entered);
-      if (mask) {
+      if constexpr (O == ChildOrder::sort_always) {
+        static_assert(N == 8, "sort_always needs the 8-wide key reduction");
+        if (mask) {
+          const int count = std::popcount(unsigned(mask));
+          push_sorted<N>(nd, tn, entered, count, stack + sp);
+          if constexpr (P::enabled) {
+            for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
+          }
+          cur = nd.ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
+          sp += uint32_t(count - 1);
+          continue;
+        }
+      } else if (mask) {
         uint32_t c0 = uint32_t(std::countr_zero(unsigned(mask)));
         const int rest = mask & (mask - 1);
         if (!rest) {
@@ -385,13 +421,13 @@ void mbvh_for_each_ray(const MBVH<N, W>& m, const RayBatch& batch, PacketRange r
 }
 
 // Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
-template <int N, int W, TriKernel K, class P>
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
 void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                      P& probe) {
   const MBVH<N, W>& m = *d.mbvh;
   mbvh_for_each_ray(m, batch, range, hits, probe,
                     [&](const NodeRay<N>& nr, const TriRay<W>& tr, const RayCtx& rc, Hit& hit, MBVHStackEntry* stack) {
-                      mbvh_traverse<N, W, K>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
+                      mbvh_traverse<N, W, K, O>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
                     });
 }
 
