@@ -136,16 +136,15 @@ template <int L>
   U = S::sub(S::mul(Cx, By), S::mul(Cy, Bx));
   V = S::sub(S::mul(Ax, Cy), S::mul(Ay, Cx));
   W = S::sub(S::mul(Bx, Ay), S::mul(By, Ax));
-  const typename S::f z = S::zero();
-  const auto zero = S::or_(S::or_(S::eq(U, z), S::eq(V, z)), S::eq(W, z));
   if constexpr (L == 1) {
-    if (zero) [[unlikely]] {
+    if (U == 0.f || V == 0.f || W == 0.f) [[unlikely]] {
       U = float(double(Cx) * By - double(Cy) * Bx);
       V = float(double(Ax) * Cy - double(Ay) * Cx);
       W = float(double(Bx) * Ay - double(By) * Ax);
     }
   } else {
-    const int zmask = S::mask(zero);
+    const typename S::f z = S::zero();
+    const int zmask = S::mask(S::or_(S::or_(S::eq(U, z), S::eq(V, z)), S::eq(W, z)));
     if (zmask) [[unlikely]] {
       alignas(32) float ax[L], ay[L], bx[L], by[L], cx[L], cy[L], u[L], v[L], w[L];
       S::store(ax, Ax), S::store(ay, Ay), S::store(bx, Bx), S::store(by, By), S::store(cx, Cx), S::store(cy, Cy);
@@ -169,6 +168,11 @@ template <int L>
     typename simd::V<L>::f& W, typename simd::V<L>::f& det) {
   using S = simd::V<L>;
   edge_functions<L>(Ax, Ay, Bx, By, Cx, Cy, U, V, W);
+  if constexpr (L == 1) {  // one ray: the same decision with early exits (most tests miss)
+    if ((U < 0.f || V < 0.f || W < 0.f) && (U > 0.f || V > 0.f || W > 0.f)) return false;
+    det = U + V + W;
+    return det != 0.f;
+  }
   const typename S::f z = S::zero();
   // (U < 0 || V < 0 || W < 0) && (U > 0 || V > 0 || W > 0), as min < 0 and max > 0.
   const auto neg = S::lt(S::min(S::min(U, V), W), z);

@@ -158,19 +158,23 @@ template <int W>
   f U, Vv, Ww, det;
   int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return false;
-  // The candidates (usually none or one per block): exact_plane_distance, the sheared distance
-  // only for a ray in the triangle's plane.
+  // The candidates (usually none or one per block): exact_plane_distance's plane equation in
+  // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
   alignas(32) float us[W], vs[W], ws[W], dets[W];
   S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
   bool found = false;
   for (; m; m &= m - 1) {
     const int l = std::countr_zero(unsigned(m));
-    const TriVerts tri{{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]},
-                       {b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
-                       {b.v[2][0][l], b.v[2][1][l], b.v[2][2][l]}};
+    const Vec3D<double> v0{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]};
+    double num, dn;
+    plane_terms(plane_normal(v0, Vec3D<double>{b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
+                             Vec3D<double>{b.v[2][0][l], b.v[2][1][l], b.v[2][2][l]}),
+                v0, to_double(r.org), to_double(r.dir), num, dn);
     const float inv_det = 1.f / dets[l];
-    float t = exact_plane_distance(r.org, r.dir, tri);
-    if (std::isnan(t)) [[unlikely]] {
+    float t;
+    if (dn != 0.0) [[likely]] {
+      t = float(num / dn);
+    } else {
       alignas(32) float azs[W], bzs[W], czs[W];
       S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
       t = sheared_distance<1>(r.szs, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det);

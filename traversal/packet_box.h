@@ -19,7 +19,7 @@ namespace tb::packet {
 // against one box. Near/far planes are selected per lane by the sign bit of the reciprocal
 // direction (blendv reads the sign bit, so -0 -> -inf selects like the scalar test). Returns the
 // lane mask of hits.
-inline uint32_t box_mask(const RayGroup& g, const BVHNode& n) {
+[[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const BVHNode& n) {
   using S = simd::V<8>;
   const float* lo = &n.lo.x;
   const float* hi = &n.hi.x;

@@ -57,7 +57,11 @@ struct V<1> {
 // V<4> and V<8> are one definition: the same operations on the SSE (_mm_*) or AVX (_mm256_*)
 // intrinsics. Compares use the VEX predicate form for both (ordered, non-signalling), so V<4>'s
 // results are those of cmpltps & co.
-#define TB_SIMD_FLOAT_OPS(P, F)                                                                  \
+#define TB_SIMD_FLOAT_OPS(P, F, L, FT, IT)                                                       \
+  static constexpr int kLanes = L;                                                               \
+  using f = FT;                                                                                  \
+  using m = FT;                                                                                  \
+  using i = IT;                                                                                  \
   static f load(const float* p) { return P##_load_ps(p); }                                      \
   static f set1(float x) { return P##_set1_ps(x); }                                              \
   static f add(f a, f b) { return P##_add_ps(a, b); }                                            \
@@ -87,11 +91,7 @@ struct V<1> {
 
 template <>
 struct V<4> {
-  static constexpr int kLanes = 4;
-  using f = __m128;
-  using m = __m128;
-  using i = __m128i;
-  TB_SIMD_FLOAT_OPS(_mm, 128)
+  TB_SIMD_FLOAT_OPS(_mm, 128, 4, __m128, __m128i)
   static float hmin(f a) {
     a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
     a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
@@ -103,11 +103,7 @@ struct V<4> {
 
 template <>
 struct V<8> {
-  static constexpr int kLanes = 8;
-  using f = __m256;
-  using m = __m256;
-  using i = __m256i;
-  TB_SIMD_FLOAT_OPS(_mm256, 256)
+  TB_SIMD_FLOAT_OPS(_mm256, 256, 8, __m256, __m256i)
   static float hmin(f a) { return V<4>::hmin(_mm_min_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1))); }
   static float lane(f a, uint32_t l) {
     return _mm256_cvtss_f32(_mm256_permutevar8x32_ps(a, _mm256_castsi128_si256(_mm_cvtsi32_si128(int(l)))));
