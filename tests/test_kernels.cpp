@@ -1,5 +1,6 @@
 // Ray/box and ray/triangle kernels on the hard cases: +-0 directions, shared edges and
 // vertices, degenerate triangles, empty intervals, huge offsets.
+#include <bit>
 #include <random>
 
 #include "test_util.h"
@@ -114,6 +115,168 @@ TEST(TriangleKernels, WatertightOnSharedEdgesAndVertices) {
     leaks += !any;
   }
   EXPECT_EQ(leaks, 0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The kernel library's templates give the same bits on every lane count: L = 4 and L = 8 lanes
+// against L separate L = 1 calls (the single-ray schemes' kernels). Coordinates on a coarse grid
+// make exact zeros (edge functions through vertices, rays on slab planes, axis-parallel rays)
+// common, so the double fallbacks and the NaN-slab rule are exercised too.
+template <int L>
+struct Lanes {
+  alignas(32) float v[L];
+};
+template <int L>
+typename simd::V<L>::f load_lanes(const float* x) {
+  return simd::V<L>::load(x);
+}
+uint32_t bits(float x) { return std::bit_cast<uint32_t>(x); }
+
+struct KernelCase {
+  std::vector<Ray> rays;
+  std::vector<TriVerts> tris;
+};
+KernelCase grid_cases(uint32_t seed, int n) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> G(-4, 4), D(-2, 2);
+  KernelCase c;
+  for (int i = 0; i < n; ++i) {
+    Vec3 d{float(D(rng)), float(D(rng)), float(D(rng))};
+    if (d == Vec3{0, 0, 0}) d = {0, 0, 1};
+    if (i % 3 == 0) d = d + Vec3{0.25f * G(rng), 0.125f * G(rng), 0.5f};  // not only grid directions
+    c.rays.push_back({{float(G(rng)), float(G(rng)), float(G(rng))}, 0.f, d, INFINITY});
+    c.tris.push_back({{float(G(rng)), float(G(rng)), float(G(rng))},
+                      {float(G(rng)), float(G(rng)), float(G(rng))},
+                      {float(G(rng)), float(G(rng)), float(G(rng))}});
+  }
+  return c;
+}
+
+template <int L>
+void check_lanes(const KernelCase& c) {
+  using S = simd::V<L>;
+  using f = typename S::f;
+  const int n = int(c.rays.size());
+  int checked_hits = 0, zero_edges = 0;
+  for (int base = 0; base + L <= n; base += L) {
+    const TriVerts& tri = c.tris[base];
+    const PlaneTri pt = make_plane_tri(tri);
+    // Per-lane inputs from RayCtx, as the one-ray kernels see them.
+    alignas(32) float o[3][L], d[3][L], inv[3][L], s[3][L], sh[6][L], xn[3][L], xf[3][L];
+    for (int l = 0; l < L; ++l) {
+      const RayCtx r(c.rays[base + l]);
+      const Vec3 A = tri.v0 - r.org, B = tri.v1 - r.org, C = tri.v2 - r.org, sv = r.org - tri.v0;
+      const Vec3 lo = tri.v0, hi = tri.v0 + Vec3{1, 2, 3};  // a box with a corner on the grid
+      for (int a = 0; a < 3; ++a) {
+        o[a][l] = r.org[a], d[a][l] = r.dir[a], inv[a][l] = r.inv[a], s[a][l] = sv[a];
+        const bool neg = a == 0 ? r.near_x : a == 1 ? r.near_y : r.near_z;
+        xn[a][l] = (neg ? hi[a] : lo[a]) - r.org[a];
+        xf[a][l] = (neg ? lo[a] : hi[a]) - r.org[a];
+      }
+      const Vec3* P[3] = {&A, &B, &C};
+      for (int v = 0; v < 3; ++v) {
+        sh[2 * v][l] = shear<1>((*P[v])[r.kx], r.sx, (*P[v])[r.kz]);
+        sh[2 * v + 1][l] = shear<1>((*P[v])[r.ky], r.sy, (*P[v])[r.kz]);
+      }
+    }
+    auto V3 = [](float (&x)[3][L], f out[3]) {
+      for (int a = 0; a < 3; ++a) out[a] = load_lanes<L>(x[a]);
+    };
+    f vo[3], vd[3], vinv[3], vs[3], vxn[3], vxf[3];
+    V3(o, vo), V3(d, vd), V3(inv, vinv), V3(s, vs), V3(xn, vxn), V3(xf, vxf);
+    // Slab test, both paddings.
+    f tn4;
+    const int box4 = S::mask(slab<L, false>(vxn, vxf, vinv, vinv, S::zero(), S::set1(INFINITY), tn4));
+    alignas(32) float tnv[L];
+    S::store(tnv, tn4);
+    for (int l = 0; l < L; ++l) {
+      const float xn1[3] = {xn[0][l], xn[1][l], xn[2][l]}, xf1[3] = {xf[0][l], xf[1][l], xf[2][l]};
+      const float r1[3] = {inv[0][l], inv[1][l], inv[2][l]};
+      float tn1;
+      const bool box1 = slab<1, false>(xn1, xf1, r1, r1, 0.f, INFINITY, tn1);
+      EXPECT_EQ(bool(box4 >> l & 1), box1);
+      EXPECT_EQ(bits(tnv[l]), bits(tn1));
+    }
+    // Watertight inside test and edge functions.
+    f U, V, W, det;
+    const int in4 = S::mask(watertight_inside<L>(load_lanes<L>(sh[0]), load_lanes<L>(sh[1]), load_lanes<L>(sh[2]),
+                                                 load_lanes<L>(sh[3]), load_lanes<L>(sh[4]), load_lanes<L>(sh[5]), U, V,
+                                                 W, det));
+    alignas(32) float uv[4][L];
+    S::store(uv[0], U), S::store(uv[1], V), S::store(uv[2], W), S::store(uv[3], det);
+    for (int l = 0; l < L; ++l) {
+      float u1, v1, w1, d1;
+      const bool in1 = watertight_inside<1>(sh[0][l], sh[1][l], sh[2][l], sh[3][l], sh[4][l], sh[5][l], u1, v1, w1, d1);
+      EXPECT_EQ(bool(in4 >> l & 1), in1);
+      EXPECT_EQ(bits(uv[0][l]), bits(u1));
+      EXPECT_EQ(bits(uv[1][l]), bits(v1));
+      EXPECT_EQ(bits(uv[2][l]), bits(w1));
+      EXPECT_EQ(bits(uv[3][l]), bits(d1));
+      zero_edges += u1 == 0.f || v1 == 0.f || w1 == 0.f;
+    }
+    // Moller and the plane kernels, against the one-ray wrappers.
+    for (int k = 0; k < 3; ++k) {
+      f t, u, v;
+      int m4;
+      if (k == 0) m4 = S::mask(moller<L>(vd, vs, tri, S::zero(), S::set1(INFINITY), S::all_true(), t, u, v));
+      else if (k == 1) m4 = S::mask(plane<L, false>(vo, vd, plane_offset<L>(vo, pt.n), pt, S::zero(), S::set1(INFINITY), S::all_true(), t, u, v));
+      else m4 = S::mask(plane<L, true>(vo, vd, plane_offset<L>(vo, pt.n), pt, S::zero(), S::set1(INFINITY), S::all_true(), t, u, v));
+      alignas(32) float tv[3][L];
+      S::store(tv[0], t), S::store(tv[1], u), S::store(tv[2], v);
+      for (int l = 0; l < L; ++l) {
+        const RayCtx r(c.rays[base + l]);
+        Hit h{INFINITY, kNoHit, 0, 0};
+        const bool h1 = k == 0 ? intersect_moller(r, tri, 0.f, h)
+                        : k == 1 ? intersect_plane<false>(r, pt, 0.f, h)
+                                 : intersect_plane<true>(r, pt, 0.f, h);
+        ASSERT_EQ(bool(m4 >> l & 1), h1) << "kernel " << k << " lane " << l;
+        if (h1) {
+          ++checked_hits;
+          EXPECT_EQ(bits(tv[0][l]), bits(h.t));
+          EXPECT_EQ(bits(tv[1][l]), bits(h.u));
+          EXPECT_EQ(bits(tv[2][l]), bits(h.v));
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked_hits, 50);  // the cases do reach the hit paths ...
+  EXPECT_GT(zero_edges, 10);    // ... and the double fallback of the edge functions
+}
+
+TEST(KernelLibrary, FourLanesMatchOneLaneBitForBit) { check_lanes<4>(grid_cases(5, 4000)); }
+TEST(KernelLibrary, EightLanesMatchOneLaneBitForBit) { check_lanes<8>(grid_cases(6, 4000)); }
+
+// exact_plane_distance's four-lane double form (the stream and packet kernels) gives the scalar
+// function's bits.
+TEST(KernelLibrary, PlaneDistanceFourLanesMatchesScalar) {
+  const KernelCase c = grid_cases(7, 400);
+  int finite = 0;
+  for (size_t i = 0; i + 4 <= c.rays.size(); i += 4) {
+    const TriVerts& tri = c.tris[i];
+    using D = simd::D4v;
+    const Vec3D<double> v0 = to_double(tri.v0);
+    const Vec3D<double> nd = plane_normal(v0, to_double(tri.v1), to_double(tri.v2));
+    alignas(32) float ox[4], oy[4], oz[4], dx[4], dy[4], dz[4], t4[4];
+    for (int l = 0; l < 4; ++l) {
+      const Ray& r = c.rays[i + l];
+      ox[l] = r.org.x, oy[l] = r.org.y, oz[l] = r.org.z, dx[l] = r.dir.x, dy[l] = r.dir.y, dz[l] = r.dir.z;
+    }
+    D num, dn;
+    plane_terms(Vec3D<D>{D(nd.x), D(nd.y), D(nd.z)}, Vec3D<D>{D(v0.x), D(v0.y), D(v0.z)},
+                Vec3D<D>{D(_mm_load_ps(ox)), D(_mm_load_ps(oy)), D(_mm_load_ps(oz))},
+                Vec3D<D>{D(_mm_load_ps(dx)), D(_mm_load_ps(dy)), D(_mm_load_ps(dz))}, num, dn);
+    _mm_store_ps(t4, (num / dn).to_float());
+    const int par = dn.zero_mask();
+    for (int l = 0; l < 4; ++l) {
+      const float t1 = exact_plane_distance(c.rays[i + l].org, c.rays[i + l].dir, tri);
+      EXPECT_EQ(bool(par >> l & 1), std::isnan(t1));
+      if (!std::isnan(t1)) {
+        EXPECT_EQ(bits(t4[l]), bits(t1));
+        ++finite;
+      }
+    }
+  }
+  EXPECT_GT(finite, 100);
 }
 
 TEST(TriangleKernels, ParseKernelNames) {

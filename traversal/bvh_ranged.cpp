@@ -108,7 +108,7 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
   // Alg. 2.6 FindFirst, over groups: the first ray of [first, last] that hits n, or kNone.
   // `found_mask` receives the hit lanes of the group holding that ray.
   template <bool kCommon, class P>
-  static uint32_t find_first(Packet& pk, const BVHNode& n, const NodeTester<kCommon>& box, uint32_t first,
+  [[gnu::always_inline]] static uint32_t find_first(Packet& pk, const BVHNode& n, const NodeTester<kCommon>& box, uint32_t first,
                              uint32_t last, uint32_t& found_mask, P& probe) {
     const uint32_t g0 = first / kW, g1 = last / kW;
     uint32_t m = test_group<kCommon>(pk, g0, box, probe) & range_mask(g0, first, last);

@@ -11,7 +11,7 @@
 // triangles), re-laid out and quantized.
 #include "structures/cwbvh.h"
 #include "traversal/mbvh_fetch.h"
-#include "traversal/mbvh8_traverse.h"  // min_key8 (moves to mbvh_traverse.h with the kernels merge)
+#include "traversal/mbvh_traverse.h"
 
 namespace tb {
 namespace {

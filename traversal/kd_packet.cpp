@@ -22,11 +22,12 @@
 // Interval padding, +-0 and NaN distances behave exactly as in kd_single (see there and
 // structures/kdtree.h), including the rule that a ray inside a split plane is not finished while
 // the far child it shares its interval with is pending (per-lane counters here). The triangle
-// tests are 8-wide transcriptions of the scalar kernels in traversal/kernels.h, operation for
-// operation (the build uses -ffp-contract=off; the watertight kernel's exact_plane_distance runs
+// tests are the kernel library's (traversal/kernels.h) on 8 lanes, the same templates kd_single
+// runs on one (the build uses -ffp-contract=off; the watertight kernel's exact_plane_distance runs
 // per hitting lane), so kd_packet returns bit-identical hits to kd_single for every kernel
-// (tests/test_kdtree.cpp checks this); --kernel selects the variant through dispatch_kernel. Parameter kd_packet (8..256, multiple of 8) caps the rays of
-// one sub-packet (default 256: a whole octant of a 16x16 packet traverses together).
+// (tests/test_kdtree.cpp checks this); --kernel selects the variant through dispatch_kernel.
+// Parameter kd_packet (8..256, multiple of 8) caps the rays of one sub-packet (default 256: a
+// whole octant of a 16x16 packet traverses together).
 #include <immintrin.h>
 
 #include <bit>

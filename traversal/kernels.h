@@ -136,16 +136,15 @@ template <int L>
   U = S::sub(S::mul(Cx, By), S::mul(Cy, Bx));
   V = S::sub(S::mul(Ax, Cy), S::mul(Ay, Cx));
   W = S::sub(S::mul(Bx, Ay), S::mul(By, Ax));
-  const typename S::f z = S::zero();
-  const auto zero = S::or_(S::or_(S::eq(U, z), S::eq(V, z)), S::eq(W, z));
   if constexpr (L == 1) {
-    if (zero) [[unlikely]] {
+    if (U == 0.f || V == 0.f || W == 0.f) [[unlikely]] {
       U = float(double(Cx) * By - double(Cy) * Bx);
       V = float(double(Ax) * Cy - double(Ay) * Cx);
       W = float(double(Bx) * Ay - double(By) * Ax);
     }
   } else {
-    const int zmask = S::mask(zero);
+    const typename S::f z = S::zero();
+    const int zmask = S::mask(S::or_(S::or_(S::eq(U, z), S::eq(V, z)), S::eq(W, z)));
     if (zmask) [[unlikely]] {
       alignas(32) float ax[L], ay[L], bx[L], by[L], cx[L], cy[L], u[L], v[L], w[L];
       S::store(ax, Ax), S::store(ay, Ay), S::store(bx, Bx), S::store(by, By), S::store(cx, Cx), S::store(cy, Cy);
@@ -169,6 +168,11 @@ template <int L>
     typename simd::V<L>::f& W, typename simd::V<L>::f& det) {
   using S = simd::V<L>;
   edge_functions<L>(Ax, Ay, Bx, By, Cx, Cy, U, V, W);
+  if constexpr (L == 1) {  // one ray: the same decision with early exits (most tests miss)
+    if ((U < 0.f || V < 0.f || W < 0.f) && (U > 0.f || V > 0.f || W > 0.f)) return false;
+    det = U + V + W;
+    return det != 0.f;
+  }
   const typename S::f z = S::zero();
   // (U < 0 || V < 0 || W < 0) && (U > 0 || V > 0 || W > 0), as min < 0 and max > 0.
   const auto neg = S::lt(S::min(S::min(U, V), W), z);
@@ -260,6 +264,7 @@ template <int L>
   const f e1x = S::set1(e1.x), e1y = S::set1(e1.y), e1z = S::set1(e1.z);
   const f e2x = S::set1(e2.x), e2y = S::set1(e2.y), e2z = S::set1(e2.z);
   const f zero = S::zero(), one = S::set1(1.f);
+  t = u = v = zero;  // defined on every lane, also when no lane hits
   // p = cross(d, e2), det = dot(e1, p)
   const f px = S::sub(S::mul(d[1], e2z), S::mul(d[2], e2y));
   const f py = S::sub(S::mul(d[2], e2x), S::mul(d[0], e2z));
@@ -312,6 +317,7 @@ template <int L, bool kApproxRcp>
   using S = simd::V<L>;
   using f = typename S::f;
   const f zero = S::zero(), one = S::set1(1.f);
+  t = u = v = zero;  // defined on every lane, also when no lane hits
   const f dn = plane_offset<L>(d, tri.n);
   ok = S::and_(ok, S::neq(dn, zero));
   if (!S::any(ok)) return ok;

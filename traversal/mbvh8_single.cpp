@@ -10,9 +10,10 @@
 // Parameters: tri_width=4|8 (SSE or AVX2 triangle blocks), collapse=sah|greedy, merge (largest
 // leaf), tri_cost (block test vs node visit, %), small (0 | 4: 4-wide blocks for leaves of <= 4
 // triangles; default 0), leaf_size and bins (binary BVH).
-// The watertight 8-wide case runs traversal/mbvh8_traverse.h (child ordering without branching on
-// the number of entered children); the other kernels and tri_width=4 run mbvh.h's mbvh_traverse.
-#include "traversal/mbvh8_traverse.h"
+// The watertight 8-wide case runs mbvh_traverse (traversal/mbvh_traverse.h) with
+// ChildOrder::sort_always (child ordering without branching on the number of entered children);
+// the other kernels and tri_width=4 with the default branching order.
+#include "traversal/mbvh_traverse.h"
 #include "traversal/mbvh_fetch.h"
 
 namespace tb {
@@ -44,7 +45,8 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     dispatch_kernel(cfg_.kernel, [&](auto k) {
       if (tri_width_ == 4) mbvh_trace_rays<8, 4, decltype(k)::value>(data4_, batch, range, hits, probe);
-      else if constexpr (decltype(k)::value == TriKernel::watertight) mbvh8_trace_rays(data8_, batch, range, hits, probe);
+      else if constexpr (decltype(k)::value == TriKernel::watertight)
+        mbvh_trace_rays<8, 8, TriKernel::watertight, ChildOrder::sort_always>(data8_, batch, range, hits, probe);
       else mbvh_trace_rays<8, 8, decltype(k)::value>(data8_, batch, range, hits, probe);
     });
   }

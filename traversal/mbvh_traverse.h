@@ -158,19 +158,23 @@ template <int W>
   f U, Vv, Ww, det;
   int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return false;
-  // The candidates (usually none or one per block): exact_plane_distance, the sheared distance
-  // only for a ray in the triangle's plane.
+  // The candidates (usually none or one per block): exact_plane_distance's plane equation in
+  // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
   alignas(32) float us[W], vs[W], ws[W], dets[W];
   S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
   bool found = false;
   for (; m; m &= m - 1) {
     const int l = std::countr_zero(unsigned(m));
-    const TriVerts tri{{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]},
-                       {b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
-                       {b.v[2][0][l], b.v[2][1][l], b.v[2][2][l]}};
+    const Vec3D<double> v0{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]};
+    double num, dn;
+    plane_terms(plane_normal(v0, Vec3D<double>{b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
+                             Vec3D<double>{b.v[2][0][l], b.v[2][1][l], b.v[2][2][l]}),
+                v0, to_double(r.org), to_double(r.dir), num, dn);
     const float inv_det = 1.f / dets[l];
-    float t = exact_plane_distance(r.org, r.dir, tri);
-    if (std::isnan(t)) [[unlikely]] {
+    float t;
+    if (dn != 0.0) [[likely]] {
+      t = float(num / dn);
+    } else {
       alignas(32) float azs[W], bzs[W], czs[W];
       S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
       t = sheared_distance<1>(r.szs, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det);
@@ -312,13 +316,37 @@ inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, ty
   }
 }
 
+// The smallest of 8 sort keys (mbvh_simd::sort_keys8: distance bits with the child index in the
+// low 3 bits; misses are the largest key): three shuffle + min steps.
+inline uint32_t min_key8(__m256i k) {
+  k = _mm256_min_epi32(k, _mm256_permute2x128_si256(k, k, 0x01));
+  k = _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(1, 0, 3, 2)));
+  k = _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)));
+  return uint32_t(_mm256_cvtsi256_si32(k));
+}
+
+// How mbvh_traverse orders the entered children of a node (a template parameter of the one loop,
+// as madmann91/bvh v2 makes its variants, rather than a copy of the loop per variant).
+//  branching: one hit child is entered directly, two are compared, three or more are sorted with
+//    the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8).
+//  sort_always (N = 8): every node with an entered child takes the same path: the bitonic network
+//    sorts the keys and pushes all but the nearest (push_sorted; with one child it pushes nothing),
+//    and the nearest comes from a three-step min reduction of the unsorted keys (min_key8), so the
+//    next node's address does not wait for the whole network. With 8 children the count varies
+//    from node to node and the branches of `branching`, plus the data-dependent compare of its
+//    two-child case, mispredict often. Measured on bounce:2 (512x512, 7 reps, median, ratio to
+//    embree_single): +4 to +13% over `branching` for mbvh8_single (8-wide blocks, watertight) on
+//    the nine scenes of /work/shared/scenes (docs/PERFORMANCE.md). The "sort always" child
+//    ordering discussed by Wald et al. (2008) and Ernst & Greiner (2008) for 4-wide nodes, with the
+//    keys of thesis Alg. 2.10.
+enum class ChildOrder { branching, sort_always };
+
 // Ordered single-ray traversal (thesis Alg. 2.8 with front-to-back order): the N children are
-// tested at once; one hit child is entered directly, two are compared, three or more are sorted
-// with the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8); the nearest is entered
-// and the others are pushed far-to-near with their entry distances. Starts at `start` (the root,
-// or a subtree when mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries
-// (at depth d at most (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
-template <int N, int W, TriKernel K, class P>
+// tested at once, the entered ones ordered as `O` says; the nearest is entered and the others are
+// pushed far-to-near with their entry distances. Starts at `start` (the root, or a subtree when
+// mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries (at depth d at most
+// (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
 inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
                           const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
   using S = simd::V<N>;
@@ -332,7 +360,19 @@ inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const Node
       typename S::f tn;
       const auto entered = box_test<N>(nd, nr, tfar, tn);
       int mask = S::mask(entered);
-      if (mask) {
+      if constexpr (O == ChildOrder::sort_always) {
+        static_assert(N == 8, "sort_always needs the 8-wide key reduction");
+        if (mask) {
+          const int count = std::popcount(unsigned(mask));
+          push_sorted<N>(nd, tn, entered, count, stack + sp);
+          if constexpr (P::enabled) {
+            for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
+          }
+          cur = nd.ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
+          sp += uint32_t(count - 1);
+          continue;
+        }
+      } else if (mask) {
         uint32_t c0 = uint32_t(std::countr_zero(unsigned(mask)));
         const int rest = mask & (mask - 1);
         if (!rest) {
@@ -391,13 +431,13 @@ void mbvh_for_each_ray(const MBVH<N, W>& m, const RayBatch& batch, PacketRange r
 }
 
 // Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
-template <int N, int W, TriKernel K, class P>
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
 void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                      P& probe) {
   const MBVH<N, W>& m = *d.mbvh;
   mbvh_for_each_ray(m, batch, range, hits, probe,
                     [&](const NodeRay<N>& nr, const TriRay<W>& tr, const RayCtx& rc, Hit& hit, MBVHStackEntry* stack) {
-                      mbvh_traverse<N, W, K>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
+                      mbvh_traverse<N, W, K, O>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
                     });
 }
 

@@ -54,38 +54,44 @@ struct V<1> {
   static float lane(f a, uint32_t) { return a; }
 };
 
+// V<4> and V<8> are one definition: the same operations on the SSE (_mm_*) or AVX (_mm256_*)
+// intrinsics. Compares use the VEX predicate form for both (ordered, non-signalling), so V<4>'s
+// results are those of cmpltps & co.
+#define TB_SIMD_FLOAT_OPS(P, F, L, FT, IT)                                                       \
+  static constexpr int kLanes = L;                                                               \
+  using f = FT;                                                                                  \
+  using m = FT;                                                                                  \
+  using i = IT;                                                                                  \
+  static f load(const float* p) { return P##_load_ps(p); }                                      \
+  static f set1(float x) { return P##_set1_ps(x); }                                              \
+  static f add(f a, f b) { return P##_add_ps(a, b); }                                            \
+  static f sub(f a, f b) { return P##_sub_ps(a, b); }                                            \
+  static f mul(f a, f b) { return P##_mul_ps(a, b); }                                            \
+  static f div(f a, f b) { return P##_div_ps(a, b); }                                            \
+  static f min(f a, f b) { return P##_min_ps(a, b); }                                            \
+  static f max(f a, f b) { return P##_max_ps(a, b); }                                            \
+  static f and_(f a, f b) { return P##_and_ps(a, b); }                                           \
+  static f or_(f a, f b) { return P##_or_ps(a, b); }                                             \
+  static f andnot(f a, f b) { return P##_andnot_ps(a, b); } /* ~a & b */                         \
+  static f blendv(f a, f b, f s) { return P##_blendv_ps(a, b, s); }                              \
+  static f lt(f a, f b) { return P##_cmp_ps(a, b, _CMP_LT_OQ); }                                 \
+  static f le(f a, f b) { return P##_cmp_ps(a, b, _CMP_LE_OQ); }                                 \
+  static f gt(f a, f b) { return P##_cmp_ps(a, b, _CMP_GT_OQ); }                                 \
+  static f ge(f a, f b) { return P##_cmp_ps(a, b, _CMP_GE_OQ); }                                 \
+  static f eq(f a, f b) { return P##_cmp_ps(a, b, _CMP_EQ_OQ); }                                 \
+  static f neq(f a, f b) { return P##_cmp_ps(a, b, _CMP_NEQ_UQ); }                               \
+  static f zero() { return P##_setzero_ps(); }                                                   \
+  static f abs(f a) { return P##_andnot_ps(P##_set1_ps(-0.f), a); }                              \
+  static f rcp(f a) { return P##_rcp_ps(a); }                                                    \
+  static f select(m s, f a) { return P##_and_ps(s, a); }                                         \
+  static int mask(f a) { return P##_movemask_ps(a); }                                            \
+  static bool any(m a) { return P##_movemask_ps(a) != 0; }                                       \
+  static m all_true() { return P##_castsi##F##_ps(P##_set1_epi32(-1)); }                         \
+  static void store(float* p, f a) { P##_store_ps(p, a); }
+
 template <>
 struct V<4> {
-  static constexpr int kLanes = 4;
-  using f = __m128;
-  using m = __m128;
-  using i = __m128i;
-  static f load(const float* p) { return _mm_load_ps(p); }
-  static f set1(float x) { return _mm_set1_ps(x); }
-  static f add(f a, f b) { return _mm_add_ps(a, b); }
-  static f sub(f a, f b) { return _mm_sub_ps(a, b); }
-  static f mul(f a, f b) { return _mm_mul_ps(a, b); }
-  static f div(f a, f b) { return _mm_div_ps(a, b); }
-  static f min(f a, f b) { return _mm_min_ps(a, b); }
-  static f max(f a, f b) { return _mm_max_ps(a, b); }
-  static f and_(f a, f b) { return _mm_and_ps(a, b); }
-  static f or_(f a, f b) { return _mm_or_ps(a, b); }
-  static f andnot(f a, f b) { return _mm_andnot_ps(a, b); }  // ~a & b
-  static f blendv(f a, f b, f s) { return _mm_blendv_ps(a, b, s); }
-  static f lt(f a, f b) { return _mm_cmplt_ps(a, b); }
-  static f le(f a, f b) { return _mm_cmple_ps(a, b); }
-  static f gt(f a, f b) { return _mm_cmpgt_ps(a, b); }
-  static f ge(f a, f b) { return _mm_cmpge_ps(a, b); }
-  static f eq(f a, f b) { return _mm_cmpeq_ps(a, b); }
-  static f neq(f a, f b) { return _mm_cmpneq_ps(a, b); }
-  static f zero() { return _mm_setzero_ps(); }
-  static f abs(f a) { return _mm_andnot_ps(_mm_set1_ps(-0.f), a); }
-  static f rcp(f a) { return _mm_rcp_ps(a); }
-  static f select(m s, f a) { return _mm_and_ps(s, a); }
-  static int mask(f a) { return _mm_movemask_ps(a); }
-  static bool any(m a) { return _mm_movemask_ps(a) != 0; }
-  static m all_true() { return _mm_castsi128_ps(_mm_set1_epi32(-1)); }
-  static void store(float* p, f a) { _mm_store_ps(p, a); }
+  TB_SIMD_FLOAT_OPS(_mm, 128, 4, __m128, __m128i)
   static float hmin(f a) {
     a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(2, 3, 0, 1)));
     a = _mm_min_ps(a, _mm_shuffle_ps(a, a, _MM_SHUFFLE(1, 0, 3, 2)));
@@ -97,44 +103,13 @@ struct V<4> {
 
 template <>
 struct V<8> {
-  static constexpr int kLanes = 8;
-  using f = __m256;
-  using m = __m256;
-  using i = __m256i;
-  static f load(const float* p) { return _mm256_load_ps(p); }
-  static f set1(float x) { return _mm256_set1_ps(x); }
-  static f add(f a, f b) { return _mm256_add_ps(a, b); }
-  static f sub(f a, f b) { return _mm256_sub_ps(a, b); }
-  static f mul(f a, f b) { return _mm256_mul_ps(a, b); }
-  static f div(f a, f b) { return _mm256_div_ps(a, b); }
-  static f min(f a, f b) { return _mm256_min_ps(a, b); }
-  static f max(f a, f b) { return _mm256_max_ps(a, b); }
-  static f and_(f a, f b) { return _mm256_and_ps(a, b); }
-  static f or_(f a, f b) { return _mm256_or_ps(a, b); }
-  static f andnot(f a, f b) { return _mm256_andnot_ps(a, b); }
-  static f blendv(f a, f b, f s) { return _mm256_blendv_ps(a, b, s); }
-  static f lt(f a, f b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
-  static f le(f a, f b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
-  static f gt(f a, f b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
-  static f ge(f a, f b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
-  static f eq(f a, f b) { return _mm256_cmp_ps(a, b, _CMP_EQ_OQ); }
-  static f neq(f a, f b) { return _mm256_cmp_ps(a, b, _CMP_NEQ_UQ); }
-  static f zero() { return _mm256_setzero_ps(); }
-  static f abs(f a) { return _mm256_andnot_ps(_mm256_set1_ps(-0.f), a); }
-  static f rcp(f a) { return _mm256_rcp_ps(a); }
-  static f select(m s, f a) { return _mm256_and_ps(s, a); }
-  static int mask(f a) { return _mm256_movemask_ps(a); }
-  static bool any(m a) { return _mm256_movemask_ps(a) != 0; }
-  static m all_true() { return _mm256_castsi256_ps(_mm256_set1_epi32(-1)); }
-  static void store(float* p, f a) { _mm256_store_ps(p, a); }
-  static float hmin(f a) {
-    __m128 m = _mm_min_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1));
-    return V<4>::hmin(m);
-  }
+  TB_SIMD_FLOAT_OPS(_mm256, 256, 8, __m256, __m256i)
+  static float hmin(f a) { return V<4>::hmin(_mm_min_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1))); }
   static float lane(f a, uint32_t l) {
     return _mm256_cvtss_f32(_mm256_permutevar8x32_ps(a, _mm256_castsi128_si256(_mm_cvtsi32_si128(int(l)))));
   }
 };
+#undef TB_SIMD_FLOAT_OPS
 
 // Double lanes for exact_plane_distance: plain double, or four lanes of AVX2 with the arithmetic
 // operators (so one expression serves both, with the same operations in the same order).

@@ -1,0 +1,97 @@
+// Packet against one BVH node: the kernel library's slab test (traversal/kernels.h slab<8>) per
+// group of 8 rays, with the plane selection and origin offsets hoisted as far as the packet
+// allows (per group when its lanes share direction signs, per node for common-origin packets).
+#pragma once
+#include <immintrin.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstring>
+
+#include "traversal/packet.h"
+
+namespace tb::packet {
+
+// ---------------------------------------------------------------------------------------------
+// The kernel library's slab test (kernels.h slab, as box_entry: padded far distance), 8 rays
+// against one box. Near/far planes are selected per lane by the sign bit of the reciprocal
+// direction (blendv reads the sign bit, so -0 -> -inf selects like the scalar test). Returns the
+// lane mask of hits.
+[[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const BVHNode& n) {
+  using S = simd::V<8>;
+  const float* lo = &n.lo.x;
+  const float* hi = &n.hi.x;
+  __m256 xn[3], xf[3];
+  for (int a = 0; a < 3; ++a) {
+    const __m256 l = _mm256_sub_ps(_mm256_set1_ps(lo[a]), g.o[a]), h = _mm256_sub_ps(_mm256_set1_ps(hi[a]), g.o[a]);
+    xn[a] = S::blendv(l, h, g.inv[a]);
+    xf[a] = S::blendv(h, l, g.inv[a]);
+  }
+  __m256 tn;
+  return uint32_t(S::mask(slab<8, false>(xn, xf, g.inv, g.inv, g.tmin, g.tfar, tn)));
+}
+
+
+// box_mask for group g of a packet, cheaper when the group's lanes agree on every direction sign
+// (the common case for coherent rays): the near and far planes are then chosen once for the
+// group, and with a common origin the plane offsets are scalars. Every lane computes the very
+// same values as in box_mask: (plane - o) * inv, padded far, NaN-first min/max.
+template <bool kCommon>
+inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n) {
+  const int s = p.gsign[g];
+  const RayGroup& G = p.rg[g];
+  if (s < 0) return box_mask(G, n);
+  const float* lo = &n.lo.x;
+  const float* hi = &n.hi.x;
+  __m256 xn[3], xf[3];
+  for (int a = 0; a < 3; ++a) {
+    const bool neg = (s >> a) & 1;
+    const float pn = neg ? hi[a] : lo[a], pf = neg ? lo[a] : hi[a];
+    if constexpr (kCommon) {
+      xn[a] = _mm256_set1_ps(pn - p.org[a]);
+      xf[a] = _mm256_set1_ps(pf - p.org[a]);
+    } else {
+      xn[a] = _mm256_sub_ps(_mm256_set1_ps(pn), G.o[a]);
+      xf[a] = _mm256_sub_ps(_mm256_set1_ps(pf), G.o[a]);
+    }
+  }
+  __m256 tn;
+  return uint32_t(_mm256_movemask_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
+}
+
+// group_box with the node's work hoisted out of the per-group loop: when every group of a
+// common-origin packet shares its direction signs (primary packets away from the axis planes),
+// the near/far plane offsets (plane - org) are the same scalars for every group, so they are
+// broadcast once per node and each group test is 6 multiplies, 6 min/max and a compare. The
+// values are exactly group_box's (same scalar subtraction, same operation order).
+template <bool kCommon>
+struct NodeTester {
+  const Packet& p;
+  const BVHNode& n;
+  bool pre = false;
+  __m256 xn[3], xf[3];
+  NodeTester(const Packet& pk, const BVHNode& nd) : p(pk), n(nd) {
+    if constexpr (kCommon) {
+      if (p.psign >= 0) {
+        pre = true;
+        const float* lo = &n.lo.x;
+        const float* hi = &n.hi.x;
+        for (int a = 0; a < 3; ++a) {
+          const bool neg = (p.psign >> a) & 1;
+          xn[a] = _mm256_set1_ps((neg ? hi[a] : lo[a]) - p.org[a]);
+          xf[a] = _mm256_set1_ps((neg ? lo[a] : hi[a]) - p.org[a]);
+        }
+      }
+    }
+  }
+  uint32_t operator()(uint32_t g) const {
+    if (!pre) return group_box<kCommon>(p, g, n);
+    const RayGroup& G = p.rg[g];
+    __m256 tn;
+    return uint32_t(_mm256_movemask_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
+  }
+};
+
+}  // namespace tb::packet
