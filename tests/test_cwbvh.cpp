@@ -42,8 +42,8 @@ TEST(CWBVH, QuantizationIsConservative) {
         ASSERT_GE(cw_decode(p, s, qh), hi) << "offset " << offset << " size " << size;
         ASSERT_LE(std::min(ql, qh), qh);
         // Tight: one cell less would not contain the box.
-        if (ql < 255) ASSERT_GT(cw_decode(p, s, uint8_t(ql + 1)), lo);
-        if (qh > 0) ASSERT_LT(cw_decode(p, s, uint8_t(qh - 1)), hi);
+        if (ql < 255) { ASSERT_GT(cw_decode(p, s, uint8_t(ql + 1)), lo); }
+        if (qh > 0) { ASSERT_LT(cw_decode(p, s, uint8_t(qh - 1)), hi); }
       }
     }
   }
