@@ -97,7 +97,7 @@ template <int L, bool kPadRcp>
 
 // The slab test for one ray: the entry distance or +inf on a miss. tfar is the current closest
 // hit (or ray tmax).
-[[gnu::always_inline]] inline float box_entry(const RayCtx& r, const Vec3& lo, const Vec3& hi, float tmin,
+inline float box_entry(const RayCtx& r, const Vec3& lo, const Vec3& hi, float tmin,
                                               float tfar) {
   const float xn[3] = {(r.near_x ? hi.x : lo.x) - r.org.x, (r.near_y ? hi.y : lo.y) - r.org.y,
                        (r.near_z ? hi.z : lo.z) - r.org.z};
@@ -160,7 +160,8 @@ template <int L>
 
 // Parts (2): the lanes where the ray passes inside the triangle (all edge functions of one sign;
 // no NaN can occur: vertices and origin are finite) and the triangle is not degenerate or
-// edge-on (det == 0: never a hit). Also returns U, V, W and det = U + V + W.
+// edge-on (det == 0: never a hit). Also returns U, V, W and det = U + V + W (for L = 1 only
+// where the test passes: one ray exits early, as most tests miss).
 template <int L>
 [[gnu::always_inline]] inline typename simd::V<L>::m watertight_inside(
     typename simd::V<L>::f Ax, typename simd::V<L>::f Ay, typename simd::V<L>::f Bx, typename simd::V<L>::f By,
@@ -231,7 +232,7 @@ inline Vec3D<double> to_double(const Vec3& v) { return {v.x, v.y, v.z}; }
 
 // The watertight test for one ray. On a hit with tmin <= t < hit.t, updates hit (t, u, v) and
 // returns true.
-[[gnu::always_inline]] inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
+inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
   const Vec3 A = tri.v0 - r.org, B = tri.v1 - r.org, C = tri.v2 - r.org;
   float U, V, W, det;
   if (!watertight_inside<1>(shear<1>(A[r.kx], r.sx, A[r.kz]), shear<1>(A[r.ky], r.sy, A[r.kz]),
@@ -287,7 +288,7 @@ template <int L>
   return S::and_(ok, S::and_(S::ge(t, tmin), S::lt(t, tfar)));
 }
 
-[[gnu::always_inline]] inline bool intersect_moller(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
+inline bool intersect_moller(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
   const float d[3] = {r.dir.x, r.dir.y, r.dir.z};
   const Vec3 sv = r.org - tri.v0;
   const float s[3] = {sv.x, sv.y, sv.z};
@@ -334,7 +335,7 @@ template <int L, bool kApproxRcp>
 }
 
 template <bool kApproxRcp>
-[[gnu::always_inline]] inline bool intersect_plane(const RayCtx& r, const PlaneTri& tri, float tmin, Hit& hit) {
+inline bool intersect_plane(const RayCtx& r, const PlaneTri& tri, float tmin, Hit& hit) {
   const float o[3] = {r.org.x, r.org.y, r.org.z}, d[3] = {r.dir.x, r.dir.y, r.dir.z};
   float t, u, v;
   if (!plane<1, kApproxRcp>(o, d, dot(r.org, tri.n), tri, tmin, hit.t, true, t, u, v)) return false;
@@ -345,7 +346,7 @@ template <bool kApproxRcp>
 // =============================================================================================
 // Tests stored triangle i with kernel K; on a closer hit records it (prim = scene index).
 template <TriKernel K>
-[[gnu::always_inline]] inline bool intersect_tri(const RayCtx& r, const TriangleSet& ts, uint32_t i, float tmin,
+inline bool intersect_tri(const RayCtx& r, const TriangleSet& ts, uint32_t i, float tmin,
                                                  Hit& hit) {
   bool h;
   if constexpr (K == TriKernel::watertight) h = intersect_watertight(r, ts.verts[i], tmin, hit);
