@@ -38,6 +38,32 @@ std::shared_ptr<const TriangleSet> fetch_triangles(const Scene& scene, Structure
 // Fetches (building on first use) the BVH and the triangle set the kernel `cfg.kernel` needs.
 BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel);
 
+// What the schemes over the binary BVH have in common besides their loop: the config, the build
+// parameters, the cached structure and its accounting, and the dispatch of --kernel to a template
+// argument. Derived provides `template <TriKernel K, class P> void run_kernel(batch, range, hits,
+// probe) const` (public) and name().
+template <class Derived>
+class BVHScheme : public TraverserBase<Derived> {
+ public:
+  explicit BVHScheme(const SchemeConfig& cfg) : cfg_(cfg), params_(bvh_params(cfg)) {}
+  void prepare(const Scene& scene, StructureCache& cache) override {
+    data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
+  }
+  std::string structure_info() const override { return data_.bvh->stats.describe(); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
+  template <class P>
+  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    dispatch_kernel(cfg_.kernel, [&](auto k) {
+      static_cast<const Derived&>(*this).template run_kernel<decltype(k)::value>(batch, range, hits, probe);
+    });
+  }
+
+ protected:
+  SchemeConfig cfg_;
+  BVHBuildParams params_;
+  BVHData data_;
+};
+
 // Seeds a hit record: the search interval is [ray.tmin, ray.tmax).
 inline Hit initial_hit(const Ray& r) { return Hit{r.tmax, kNoHit, 0.f, 0.f}; }
 // Turns a search record into the reported hit: misses carry t = +inf.

@@ -20,21 +20,12 @@ using namespace packet;
 // node, and a 64-ray packet of divergent rays reaches fewer nodes than a 256-ray one.
 constexpr int kDefaultSplit = 1;
 
-class BVHMasked final : public TraverserBase<BVHMasked> {
+class BVHMasked final : public BVHScheme<BVHMasked> {
+  friend class BVHScheme<BVHMasked>;  // calls run_kernel
  public:
   explicit BVHMasked(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(bvh_params(cfg)), split_(cfg.get_bool("split")) {}
+      : BVHScheme(cfg), split_(cfg.get_bool("split")) {}
   std::string_view name() const override { return "bvh_masked"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
-
-  template <class P>
-  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
-  }
 
  private:
   // A stacked node with the lanes (one byte per group of 8 rays) that hit it when it was pushed.
@@ -144,10 +135,7 @@ class BVHMasked final : public TraverserBase<BVHMasked> {
     }
   }
 
-  SchemeConfig cfg_;
-  BVHBuildParams params_;
   bool split_;
-  BVHData data_;
 };
 
 }  // namespace

@@ -28,21 +28,12 @@ using namespace packet;
 // amortisation of the nodes near the root (Overbeck et al. 2008 favour large packets too).
 constexpr int kDefaultSplit = 0;
 
-class BVHPartition final : public TraverserBase<BVHPartition> {
+class BVHPartition final : public BVHScheme<BVHPartition> {
+  friend class BVHScheme<BVHPartition>;  // calls run_kernel
  public:
   explicit BVHPartition(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(bvh_params(cfg)), split_(cfg.get_bool("split")) {}
+      : BVHScheme(cfg), split_(cfg.get_bool("split")) {}
   std::string_view name() const override { return "bvh_partition"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
-
-  template <class P>
-  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
-  }
 
  private:
   struct Entry {
@@ -137,10 +128,7 @@ class BVHPartition final : public TraverserBase<BVHPartition> {
     }
   }
 
-  SchemeConfig cfg_;
-  BVHBuildParams params_;
   bool split_;
-  BVHData data_;
 };
 
 }  // namespace

@@ -46,27 +46,17 @@ constexpr int kDefaultSplit = 0;
 // 8-plane triangle test rarely pays for itself; with tricull=0 the split planes are not fitted.
 constexpr int kDefaultTriCull = 0;
 
-class BVHRanged final : public TraverserBase<BVHRanged> {
+class BVHRanged final : public BVHScheme<BVHRanged> {
+  friend class BVHScheme<BVHRanged>;  // calls run_kernel
  public:
   explicit BVHRanged(const SchemeConfig& cfg)
-      : cfg_(cfg),
-        params_(bvh_params(cfg)),
+      : BVHScheme(cfg),
         split_(cfg.get_bool("split")),
         split_planes_(cfg.get_bool("subfrusta")),
         tricull_(cfg.get_int("tricull")),
         leafmask_(cfg.get_bool("leafmask")),
         track_last_(cfg.get_bool("last")) {}
   std::string_view name() const override { return "bvh_ranged"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
-
-  template <class P>
-  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
-  }
 
  private:
   struct Entry {
@@ -210,12 +200,9 @@ class BVHRanged final : public TraverserBase<BVHRanged> {
     if (hit) pk.update_tfar_max();
   }
 
-  SchemeConfig cfg_;
-  BVHBuildParams params_;
   bool split_, split_planes_;
   int tricull_;
   bool leafmask_, track_last_;
-  BVHData data_;
 };
 
 }  // namespace

@@ -6,20 +6,11 @@
 namespace tb {
 namespace {
 
-class BVHSingle final : public TraverserBase<BVHSingle> {
+class BVHSingle final : public BVHScheme<BVHSingle> {
+  friend class BVHScheme<BVHSingle>;  // calls run_kernel
  public:
-  explicit BVHSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(bvh_params(cfg)) {}
+  explicit BVHSingle(const SchemeConfig& cfg) : BVHScheme(cfg) {}
   std::string_view name() const override { return "bvh_single"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    data_ = fetch_bvh(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.bvh->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
-
-  template <class P>
-  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
-  }
 
  private:
   struct Entry {
@@ -78,10 +69,6 @@ class BVHSingle final : public TraverserBase<BVHSingle> {
       probe.write(&hits[i], sizeof(Hit));
     }
   }
-
-  SchemeConfig cfg_;
-  BVHBuildParams params_;
-  BVHData data_;
 };
 
 }  // namespace

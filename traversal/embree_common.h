@@ -54,14 +54,25 @@ inline Hit from_embree(const RTCRayHit& rh) {
   return Hit{rh.ray.tfar, rh.hit.primID, rh.hit.u, rh.hit.v};
 }
 
-// Base for the three Embree schemes: config and the cached scene.
-class EmbreeTraverserBase {
- protected:
-  explicit EmbreeTraverserBase(const SchemeConfig& cfg) : robust_(embree_robust(cfg)), quality_(embree_quality(cfg)) {}
-  void prepare_embree(const Scene& scene, StructureCache& cache) {
+// Base for the three Embree schemes: config, the cached scene, its memory; Derived provides name()
+// and `template <class P> void run(batch, range, hits, probe) const`.
+template <class Derived>
+class EmbreeScheme : public TraverserBase<Derived> {
+ public:
+  explicit EmbreeScheme(const SchemeConfig& cfg) : robust_(embree_robust(cfg)), quality_(embree_quality(cfg)) {}
+  void prepare(const Scene& scene, StructureCache& cache) override {
     scene_ = fetch_embree_scene(scene, cache, quality_, robust_);
   }
-  size_t embree_bytes() const { return scene_ ? scene_->bytes() : 0; }
+  size_t structure_bytes() const override { return scene_ ? scene_->bytes() : 0; }
+
+ protected:
+  // An intersect context flagged coherent for common-origin (primary) batches, incoherent otherwise.
+  static RTCIntersectContext coherence_context(const RayBatch& batch) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = batch.common_origin ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    return ctx;
+  }
   bool robust_;
   EmbreeQuality quality_;
   std::shared_ptr<const EmbreeScene> scene_;

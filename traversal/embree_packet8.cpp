@@ -5,18 +5,14 @@
 namespace tb {
 namespace {
 
-class EmbreePacket8 final : public TraverserBase<EmbreePacket8>, EmbreeTraverserBase {
+class EmbreePacket8 final : public EmbreeScheme<EmbreePacket8> {
  public:
-  explicit EmbreePacket8(const SchemeConfig& cfg) : EmbreeTraverserBase(cfg) {}
+  explicit EmbreePacket8(const SchemeConfig& cfg) : EmbreeScheme(cfg) {}
   std::string_view name() const override { return "embree_packet8"; }
-  void prepare(const Scene& scene, StructureCache& cache) override { prepare_embree(scene, cache); }
-  size_t structure_bytes() const override { return embree_bytes(); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = batch.common_origin ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    RTCIntersectContext ctx = coherence_context(batch);
     alignas(32) RTCRayHit8 rh;
     alignas(32) int valid[8];
     for (uint32_t p = range.first; p < range.last; ++p) {

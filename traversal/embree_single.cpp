@@ -4,12 +4,10 @@
 namespace tb {
 namespace {
 
-class EmbreeSingle final : public TraverserBase<EmbreeSingle>, EmbreeTraverserBase {
+class EmbreeSingle final : public EmbreeScheme<EmbreeSingle> {
  public:
-  explicit EmbreeSingle(const SchemeConfig& cfg) : EmbreeTraverserBase(cfg) {}
+  explicit EmbreeSingle(const SchemeConfig& cfg) : EmbreeScheme(cfg) {}
   std::string_view name() const override { return "embree_single"; }
-  void prepare(const Scene& scene, StructureCache& cache) override { prepare_embree(scene, cache); }
-  size_t structure_bytes() const override { return embree_bytes(); }
 
   // Embree's internals cannot be instrumented: the probe sees only ray reads and hit writes.
   template <class P>

@@ -7,18 +7,14 @@
 namespace tb {
 namespace {
 
-class EmbreeStream final : public TraverserBase<EmbreeStream>, EmbreeTraverserBase {
+class EmbreeStream final : public EmbreeScheme<EmbreeStream> {
  public:
-  explicit EmbreeStream(const SchemeConfig& cfg) : EmbreeTraverserBase(cfg) {}
+  explicit EmbreeStream(const SchemeConfig& cfg) : EmbreeScheme(cfg) {}
   std::string_view name() const override { return "embree_stream"; }
-  void prepare(const Scene& scene, StructureCache& cache) override { prepare_embree(scene, cache); }
-  size_t structure_bytes() const override { return embree_bytes(); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = batch.common_origin ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    RTCIntersectContext ctx = coherence_context(batch);
     std::vector<RTCRayHit> stream;
     for (uint32_t p = range.first; p < range.last; ++p) {
       const uint32_t b = batch.packet_begin[p], n = batch.packet_rays(p);

@@ -27,4 +27,26 @@ KDBuildParams kd_params(const SchemeConfig& cfg);
 // times, so a leaf reads one contiguous run; the same layout the BVH schemes use).
 KDData fetch_kd(const Scene& scene, StructureCache& cache, const KDBuildParams& params, TriKernel kernel);
 
+// kd_single's and kd_packet's common part, as BVHScheme is the BVH schemes': Derived provides
+// `template <TriKernel K, class P> void run_kernel(batch, range, hits, probe) const`.
+template <class Derived>
+class KDScheme : public TraverserBase<Derived> {
+ public:
+  explicit KDScheme(const SchemeConfig& cfg) : cfg_(cfg), params_(kd_params(cfg)) {}
+  void prepare(const Scene& scene, StructureCache& cache) override { data_ = fetch_kd(scene, cache, params_, cfg_.kernel); }
+  std::string structure_info() const override { return data_.tree->stats.describe(); }
+  size_t structure_bytes() const override { return data_.bytes(); }
+  template <class P>
+  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    dispatch_kernel(cfg_.kernel, [&](auto k) {
+      static_cast<const Derived&>(*this).template run_kernel<decltype(k)::value>(batch, range, hits, probe);
+    });
+  }
+
+ protected:
+  SchemeConfig cfg_;
+  KDBuildParams params_;
+  KDData data_;
+};
+
 }  // namespace tb

@@ -91,21 +91,14 @@ struct alignas(32) Workspace {
   uint8_t snan[KDTree::kMaxDepth + 2][kGroups];
 };
 
-class KDPacket final : public TraverserBase<KDPacket> {
+class KDPacket final : public KDScheme<KDPacket> {
+  friend class KDScheme<KDPacket>;  // calls run_kernel
  public:
   explicit KDPacket(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(kd_params(cfg)), max_rays_(cfg.get_int("kd_packet")) {
+      : KDScheme(cfg), max_rays_(cfg.get_int("kd_packet")) {
     if (max_rays_ % 8 != 0) throw InputError("parameter kd_packet must be a multiple of 8 in [8, 256]");
   }
   std::string_view name() const override { return "kd_packet"; }
-  void prepare(const Scene& scene, StructureCache& cache) override { data_ = fetch_kd(scene, cache, params_, cfg_.kernel); }
-  std::string structure_info() const override { return data_.tree->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(); }
-
-  template <class P>
-  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
-  }
 
  private:
   template <TriKernel K, class P>
@@ -404,10 +397,7 @@ class KDPacket final : public TraverserBase<KDPacket> {
     if (S::mask(ok)) commit(h, ok, t, u, v, prim);
   }
 
-  SchemeConfig cfg_;
-  KDBuildParams params_;
   int max_rays_;
-  KDData data_;
 };
 
 }  // namespace

@@ -19,18 +19,11 @@
 namespace tb {
 namespace {
 
-class KDSingle final : public TraverserBase<KDSingle> {
+class KDSingle final : public KDScheme<KDSingle> {
+  friend class KDScheme<KDSingle>;  // calls run_kernel
  public:
-  explicit KDSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(kd_params(cfg)) {}
+  explicit KDSingle(const SchemeConfig& cfg) : KDScheme(cfg) {}
   std::string_view name() const override { return "kd_single"; }
-  void prepare(const Scene& scene, StructureCache& cache) override { data_ = fetch_kd(scene, cache, params_, cfg_.kernel); }
-  std::string structure_info() const override { return data_.tree->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(); }
-
-  template <class P>
-  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { run_kernel<decltype(k)::value>(batch, range, hits, probe); });
-  }
 
  private:
   struct Entry {
@@ -128,9 +121,6 @@ class KDSingle final : public TraverserBase<KDSingle> {
     }
   }
 
-  SchemeConfig cfg_;
-  KDBuildParams params_;
-  KDData data_;
 };
 
 }  // namespace
