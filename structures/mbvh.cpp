@@ -7,9 +7,6 @@
 #include <cstdio>
 #include <stdexcept>
 
-// Only for mbvh_params (SchemeConfig) and fetch_mbvh below, which belong in traversal/ (issue 15).
-#include "traversal/traverser.h"
-
 namespace tb {
 
 std::string MBVHBuildParams::key(int width, int tri_width) const {

@@ -19,8 +19,6 @@
 
 namespace tb {
 
-struct SchemeConfig;  // traversal/traverser.h; only for mbvh_params below (to move to traversal/)
-
 // ---------------------------------------------------------------------------------------------
 // Layout
 
