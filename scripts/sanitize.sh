@@ -33,6 +33,9 @@ SLOW='^Registry/SchemeRobustness\.'
 SLOW+='|^KDTraversal\.(KernelVariantsAndParameters|NoLeaksOnHardCases)$'
 SLOW+='|^RayGrid\.(MatchesReferenceOnEveryWorkloadAndParameter|NoLeaksWithHugeOffsets)$'
 SLOW+='|^KDTree\.BuildsTwoHundredThousandTriangles$|^MBVH\.CollapseInvariants$'
+# The exact-reference sweeps (every scheme x hard case x scene against GMP rationals): minutes each
+# under ASan; the oracle's own unit and property tests (ExactOracle.*) stay.
+SLOW+='|^Registry/ExactKinds\.|^ExactReference\.|^SpatialBVH\.SchemesStayWatertight$'
 EXCLUDE=${SANITIZE_EXCLUDE:-$SLOW}
 [ "${SANITIZE_ALL:-0}" = 1 ] && EXCLUDE='^$'
 
