@@ -130,6 +130,7 @@ extern template struct MBVH<8, 8>;
 // The structure and, for the scalar kernels, their triangle set in lane order.
 template <int N, int W>
 struct MBVHData {
+  static constexpr int kN = N, kW = W;
   std::shared_ptr<const MBVH<N, W>> mbvh;
   std::shared_ptr<const TriangleSet> tris;  // null for the watertight kernel (it reads the blocks)
 };

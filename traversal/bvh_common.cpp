@@ -24,11 +24,4 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   return p;
 }
 
-BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel) {
-  BVHData d;
-  d.bvh = cache.get<BVH>(params.key(), [&] { return BVH::build(scene, params); });
-  d.tris = fetch_triangles(scene, cache, params.key(), kernel, [&] { return d.bvh->prim_index; });
-  return d;
-}
-
 }  // namespace tb

@@ -20,11 +20,11 @@ using namespace packet;
 // node, and a 64-ray packet of divergent rays reaches fewer nodes than a 256-ray one.
 constexpr int kDefaultSplit = 1;
 
-class BVHMasked final : public BVHScheme<BVHMasked> {
-  friend class BVHScheme<BVHMasked>;  // calls run_kernel
+class BVHMasked final : public BVHPacketScheme<BVHMasked> {
+  friend BVHPacketScheme;  // its packet loop calls traverse with our Entry
+
  public:
-  explicit BVHMasked(const SchemeConfig& cfg)
-      : BVHScheme(cfg), split_(cfg.get_bool("split")) {}
+  explicit BVHMasked(const SchemeConfig& cfg) : BVHPacketScheme(cfg) {}
   std::string_view name() const override { return "bvh_masked"; }
 
  private:
@@ -33,33 +33,6 @@ class BVHMasked final : public BVHScheme<BVHMasked> {
     uint8_t mask[kMaxGroups];
     uint32_t node;
   };
-  struct Scratch {
-    Packet pk;
-    std::vector<Entry> stack;
-  };
-
-  template <TriKernel K, class P>
-  void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    auto s = std::make_unique<Scratch>();
-    s->stack.resize(data_.bvh->stats.max_depth + 2);
-    for (uint32_t p = range.first; p < range.last; ++p) {
-      for_each_subpacket(batch, batch.packet_begin[p], batch.packet_begin[p + 1], split_, [&](uint32_t b, uint32_t e) {
-        Packet& pk = s->pk;
-        load_packet(pk, &batch.rays[b], e - b, probe);
-        if constexpr (P::enabled) if (probe.counts) probe.counts->rays += e - b;
-        if (pk.common_origin) traverse<K, true>(pk, s->stack.data(), probe);
-        else traverse<K, false>(pk, s->stack.data(), probe);
-        store_hits(pk, &hits[b], probe);
-      });
-    }
-  }
-
-  template <bool kCommon, class P>
-  static uint32_t test_group(const Packet& pk, uint32_t g, const NodeTester<kCommon>& box, P& probe) {
-    probe.read(&pk.rg[g], sizeof(RayGroup));
-    return box(g);
-  }
-
   // Re-tests the lanes of `m` against node n with the current closest hits; false when none is left.
   template <bool kCommon, class P>
   static bool retest(const Packet& pk, const BVHNode& n, uint8_t* m, P& probe) {
@@ -72,7 +45,7 @@ class BVHMasked final : public BVHScheme<BVHMasked> {
 
   template <TriKernel K, bool kCommon, class P>
   void traverse(Packet& pk, Entry* stack, P& probe) const {
-    const BVHNode* nodes = data_.bvh->nodes.data();
+    const BVHNode* nodes = data_.tree->nodes.data();
     const TriangleSet& ts = *data_.tris;
     alignas(32) uint8_t cur[kMaxGroups], ml[kMaxGroups], mr[kMaxGroups];
     std::memset(cur, 0xFF, sizeof cur);
@@ -135,7 +108,6 @@ class BVHMasked final : public BVHScheme<BVHMasked> {
     }
   }
 
-  bool split_;
 };
 
 }  // namespace

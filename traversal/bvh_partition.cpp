@@ -28,46 +28,20 @@ using namespace packet;
 // amortisation of the nodes near the root (Overbeck et al. 2008 favour large packets too).
 constexpr int kDefaultSplit = 0;
 
-class BVHPartition final : public BVHScheme<BVHPartition> {
-  friend class BVHScheme<BVHPartition>;  // calls run_kernel
+class BVHPartition final : public BVHPacketScheme<BVHPartition> {
+  friend BVHPacketScheme;  // its packet loop calls traverse with our Entry
+
  public:
-  explicit BVHPartition(const SchemeConfig& cfg)
-      : BVHScheme(cfg), split_(cfg.get_bool("split")) {}
+  explicit BVHPartition(const SchemeConfig& cfg) : BVHPacketScheme(cfg) {}
   std::string_view name() const override { return "bvh_partition"; }
 
  private:
   struct Entry {
     uint32_t node, count;
   };
-  struct Scratch {
-    Packet pk;
-    std::vector<Entry> stack;
-  };
-
-  template <TriKernel K, class P>
-  void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    auto s = std::make_unique<Scratch>();
-    s->stack.resize(data_.bvh->stats.max_depth + 2);
-    for (uint32_t p = range.first; p < range.last; ++p) {
-      for_each_subpacket(batch, batch.packet_begin[p], batch.packet_begin[p + 1], split_, [&](uint32_t b, uint32_t e) {
-        Packet& pk = s->pk;
-        load_packet(pk, &batch.rays[b], e - b, probe);
-        if constexpr (P::enabled) if (probe.counts) probe.counts->rays += e - b;
-        if (pk.common_origin) {
-          pk.frustum_pending = true;  // built on the first node the IA bounds do not decide
-          pk.frustum_split = false;
-          traverse<K, true>(pk, s->stack.data(), probe);
-        } else {
-          traverse<K, false>(pk, s->stack.data(), probe);
-        }
-        store_hits(pk, &hits[b], probe);
-      });
-    }
-  }
-
   template <TriKernel K, bool kCommon, class P>
   void traverse(Packet& pk, Entry* stack, P& probe) const {
-    const BVHNode* nodes = data_.bvh->nodes.data();
+    const BVHNode* nodes = data_.tree->nodes.data();
     const TriangleSet& ts = *data_.tris;
     uint8_t idx[kMaxGroups];   // group indices, active ones first
     uint8_t lanes[kMaxGroups]; // per group: its lanes that hit the node last tested
@@ -128,7 +102,6 @@ class BVHPartition final : public BVHScheme<BVHPartition> {
     }
   }
 
-  bool split_;
 };
 
 }  // namespace

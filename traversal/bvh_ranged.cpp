@@ -46,16 +46,14 @@ constexpr int kDefaultSplit = 0;
 // 8-plane triangle test rarely pays for itself; with tricull=0 the split planes are not fitted.
 constexpr int kDefaultTriCull = 0;
 
-class BVHRanged final : public BVHScheme<BVHRanged> {
-  friend class BVHScheme<BVHRanged>;  // calls run_kernel
+class BVHRanged final : public BVHPacketScheme<BVHRanged> {
+  friend BVHPacketScheme;  // its packet loop calls traverse with our Entry
+
  public:
+  // The sub-frusta's split planes only cull triangles: without tricull they are not fitted.
   explicit BVHRanged(const SchemeConfig& cfg)
-      : BVHScheme(cfg),
-        split_(cfg.get_bool("split")),
-        split_planes_(cfg.get_bool("subfrusta")),
-        tricull_(cfg.get_int("tricull")),
-        leafmask_(cfg.get_bool("leafmask")),
-        track_last_(cfg.get_bool("last")) {}
+      : BVHPacketScheme(cfg, cfg.get_bool("subfrusta") && cfg.get_int("tricull") > 0),
+        tricull_(cfg.get_int("tricull")), leafmask_(cfg.get_bool("leafmask")), track_last_(cfg.get_bool("last")) {}
   std::string_view name() const override { return "bvh_ranged"; }
 
  private:
@@ -63,38 +61,6 @@ class BVHRanged final : public BVHScheme<BVHRanged> {
     uint32_t node;
     uint16_t first, last;
   };
-  struct Scratch {
-    Packet pk;
-    std::vector<Entry> stack;
-  };
-
-  template <TriKernel K, class P>
-  void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    auto s = std::make_unique<Scratch>();  // per call: safe for concurrent calls on disjoint ranges
-    s->stack.resize(data_.bvh->stats.max_depth + 2);
-    for (uint32_t p = range.first; p < range.last; ++p) {
-      for_each_subpacket(batch, batch.packet_begin[p], batch.packet_begin[p + 1], split_, [&](uint32_t b, uint32_t e) {
-        Packet& pk = s->pk;
-        load_packet(pk, &batch.rays[b], e - b, probe);
-        if constexpr (P::enabled) if (probe.counts) probe.counts->rays += e - b;
-        if (pk.common_origin) {
-          pk.frustum_pending = true;  // built on the first node the IA bounds do not decide
-          pk.frustum_split = split_planes_ && tricull_ > 0;  // the split planes only cull triangles
-          traverse<K, true>(pk, s->stack.data(), probe);
-        } else {
-          traverse<K, false>(pk, s->stack.data(), probe);
-        }
-        store_hits(pk, &hits[b], probe);
-      });
-    }
-  }
-
-  template <bool kCommon, class P>
-  static uint32_t test_group(const Packet& pk, uint32_t g, const NodeTester<kCommon>& box, P& probe) {
-    probe.read(&pk.rg[g], sizeof(RayGroup));
-    return box(g);
-  }
-
   // Alg. 2.6 FindFirst, over groups: the first ray of [first, last] that hits n, or kNone.
   // `found_mask` receives the hit lanes of the group holding that ray.
   template <bool kCommon, class P>
@@ -128,7 +94,7 @@ class BVHRanged final : public BVHScheme<BVHRanged> {
 
   template <TriKernel K, bool kCommon, class P>
   void traverse(Packet& pk, Entry* stack, P& probe) const {
-    const BVHNode* nodes = data_.bvh->nodes.data();
+    const BVHNode* nodes = data_.tree->nodes.data();
     uint32_t sp = 0, node = 0, first = 0, last = pk.n - 1;
     for (;;) {
       const BVHNode& nd = nodes[node];
@@ -200,7 +166,6 @@ class BVHRanged final : public BVHScheme<BVHRanged> {
     if (hit) pk.update_tfar_max();
   }
 
-  bool split_, split_planes_;
   int tricull_;
   bool leafmask_, track_last_;
 };

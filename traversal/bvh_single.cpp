@@ -7,29 +7,18 @@ namespace tb {
 namespace {
 
 class BVHSingle final : public BVHScheme<BVHSingle> {
-  friend class BVHScheme<BVHSingle>;  // calls run_kernel
  public:
-  explicit BVHSingle(const SchemeConfig& cfg) : BVHScheme(cfg) {}
+  using TreeScheme::TreeScheme;
   std::string_view name() const override { return "bvh_single"; }
-
- private:
-  struct Entry {
-    uint32_t node;
-    float dist;
-  };
 
   template <TriKernel K, class P>
   void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    const BVH& bvh = *data_.bvh;
+    const BVH& bvh = *data_.tree;
     const TriangleSet& tris = *data_.tris;
     const BVHNode* nodes = bvh.nodes.data();
     std::vector<Entry> stack(bvh.stats.max_depth + 2);
-    for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
-      const Ray& ray = batch.rays[i];
-      probe.read(&ray, sizeof(Ray));
-      if constexpr (P::enabled) if (probe.counts) probe.counts->rays++;
+    for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       const RayCtx rc(ray);
-      Hit hit = initial_hit(ray);
       uint32_t sp = 0;
       uint32_t node = 0;
       if (box_entry(rc, nodes[0].lo, nodes[0].hi, ray.tmin, hit.t) == INFINITY) node = UINT32_MAX;
@@ -65,10 +54,14 @@ class BVHSingle final : public BVHScheme<BVHSingle> {
           if (e.dist < hit.t) { node = e.node; break; }
         }
       }
-      hits[i] = finish_hit(hit);
-      probe.write(&hits[i], sizeof(Hit));
-    }
+    });
   }
+
+ private:
+  struct Entry {
+    uint32_t node;
+    float dist;
+  };
 };
 
 }  // namespace

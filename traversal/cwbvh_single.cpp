@@ -18,10 +18,6 @@ namespace {
 
 constexpr MBVHDefaults kDefaults{4, 16, true, 0};
 
-struct CWData {
-  std::shared_ptr<const CWBVH> cw;
-};
-
 // Per-ray constants of the decoded box test: as NodeRay<8>, with the near/far choice per axis
 // expressed as which quantized array holds the near planes.
 struct CWRay {
@@ -106,35 +102,25 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   std::string_view name() const override { return "cwbvh_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     const MBVHData<8, 8> m = fetch_mbvh<8, 8>(scene, cache, params_, TriKernel::watertight);
-    data_.cw = cache.get<CWBVH>(params_.key(8, 8), [&] { return CWBVH::compress(*m.mbvh); });
+    cw_ = cache.get<CWBVH>(params_.key(8, 8), [&] { return CWBVH::compress(*m.mbvh); });
   }
-  std::string structure_info() const override { return data_.cw->stats.describe(); }
-  size_t structure_bytes() const override { return data_.cw->stats.node_bytes + data_.cw->stats.tri_bytes; }
-  size_t node_bytes() const { return data_.cw->stats.node_bytes; }
+  std::string structure_info() const override { return cw_->stats.describe(); }
+  size_t structure_bytes() const override { return cw_->stats.node_bytes + cw_->stats.tri_bytes; }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    const CWBVH& t = *data_.cw;
+    const CWBVH& t = *cw_;
     std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
-    for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
-      const Ray& ray = batch.rays[i];
-      probe.read(&ray, sizeof(Ray));
-      if constexpr (P::enabled)
-        if (probe.counts) probe.counts->rays++;
+    for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       const RayCtx rc(ray);
-      const CWRay cr(rc, ray.tmin);
-      const TriRay<8> tr(rc, ray.tmin);
-      Hit hit = initial_hit(ray);
-      cw_traverse(t, cr, tr, hit, stack.data(), probe);
-      hits[i] = finish_hit(hit);
-      probe.write(&hits[i], sizeof(Hit));
-    }
+      cw_traverse(t, CWRay(rc, ray.tmin), TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+    });
   }
 
  private:
   SchemeConfig cfg_;
   MBVHBuildParams params_;
-  CWData data_;
+  std::shared_ptr<const CWBVH> cw_;
 };
 
 }  // namespace

@@ -1,7 +1,5 @@
 #include "traversal/kd_common.h"
 
-#include "traversal/bvh_common.h"
-
 namespace tb {
 
 ParamSpecs kd_param_specs() {
@@ -27,13 +25,6 @@ KDBuildParams kd_params(const SchemeConfig& cfg) {
   p.max_leaf = cfg.get_int("kd_max_leaf");
   p.planar_both = cfg.get_bool("kd_planar_both");
   return p;
-}
-
-KDData fetch_kd(const Scene& scene, StructureCache& cache, const KDBuildParams& params, TriKernel kernel) {
-  KDData d;
-  d.tree = cache.get<KDTree>(params.key(), [&] { return KDTree::build(scene, params); });
-  d.tris = fetch_triangles(scene, cache, params.key(), kernel, [&] { return d.tree->prim_index; });
-  return d;
 }
 
 }  // namespace tb

@@ -92,15 +92,13 @@ struct alignas(32) Workspace {
 };
 
 class KDPacket final : public KDScheme<KDPacket> {
-  friend class KDScheme<KDPacket>;  // calls run_kernel
  public:
   explicit KDPacket(const SchemeConfig& cfg)
-      : KDScheme(cfg), max_rays_(cfg.get_int("kd_packet")) {
+      : TreeScheme(cfg), max_rays_(cfg.get_int("kd_packet")) {
     if (max_rays_ % 8 != 0) throw InputError("parameter kd_packet must be a multiple of 8 in [8, 256]");
   }
   std::string_view name() const override { return "kd_packet"; }
 
- private:
   template <TriKernel K, class P>
   void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     thread_local std::unique_ptr<Workspace> ws_holder;
@@ -121,6 +119,7 @@ class KDPacket final : public KDScheme<KDPacket> {
     }
   }
 
+ private:
   // Loads rays into the workspace; lanes past n (and rays that miss the root cell) are inactive.
   template <class P>
   int load(const RayBatch& batch, const uint32_t* idx, int n, Workspace& ws, P& probe) const {

@@ -20,17 +20,9 @@ namespace tb {
 namespace {
 
 class KDSingle final : public KDScheme<KDSingle> {
-  friend class KDScheme<KDSingle>;  // calls run_kernel
  public:
-  explicit KDSingle(const SchemeConfig& cfg) : KDScheme(cfg) {}
+  using TreeScheme::TreeScheme;
   std::string_view name() const override { return "kd_single"; }
-
- private:
-  struct Entry {
-    uint32_t node;
-    float tn, tf;
-    uint32_t in_plane;  // pushed for a ray inside the split plane (NaN distance)
-  };
 
   template <TriKernel K, class P>
   void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -39,12 +31,8 @@ class KDSingle final : public KDScheme<KDSingle> {
     const KDNode* nodes = kd.nodes.data();
     // Each push is followed by a descent, so the stack never holds more than the depth.
     Entry stack[KDTree::kMaxDepth + 2];
-    for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
-      const Ray& ray = batch.rays[i];
-      probe.read(&ray, sizeof(Ray));
-      if constexpr (P::enabled) if (probe.counts) probe.counts->rays++;
+    for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       const RayCtx rc(ray);
-      Hit hit = initial_hit(ray);
       float tn, tf;
       if (!kd.nodes.empty() && kd_clip_ray(kd.bounds, rc.org, rc.dir, rc.inv, ray.tmin, ray.tmax, tn, tf)) {
         const float org[3] = {rc.org.x, rc.org.y, rc.org.z};
@@ -116,11 +104,15 @@ class KDSingle final : public KDScheme<KDSingle> {
           if (!popped) break;
         }
       }
-      hits[i] = finish_hit(hit);
-      probe.write(&hits[i], sizeof(Hit));
-    }
+    });
   }
 
+ private:
+  struct Entry {
+    uint32_t node;
+    float tn, tf;
+    uint32_t in_plane;  // pushed for a ray inside the split plane (NaN distance)
+  };
 };
 
 }  // namespace

@@ -31,23 +31,21 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
       : cfg_(cfg), tri_width_(cfg.get_int("tri_width")), params_(mbvh_params(cfg, kDefaults)) {}
   std::string_view name() const override { return "mbvh8_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
-    if (tri_width_ == 4) data4_ = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
-    else data8_ = fetch_mbvh<8, 8>(scene, cache, params_, cfg_.kernel);
+    if (tri_width_ == 4) data_.data = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
+    else data_.data = fetch_mbvh<8, 8>(scene, cache, params_, cfg_.kernel);
   }
-  std::string structure_info() const override {
-    return tri_width_ == 4 ? data4_.mbvh->stats.describe() : data8_.mbvh->stats.describe();
-  }
-  size_t structure_bytes() const override {
-    return tri_width_ == 4 ? mbvh_bytes(data4_, cfg_.kernel) : mbvh_bytes(data8_, cfg_.kernel);
-  }
+  std::string structure_info() const override { return data_.describe(); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     dispatch_kernel(cfg_.kernel, [&](auto k) {
-      if (tri_width_ == 4) mbvh_trace_rays<8, 4, decltype(k)::value>(data4_, batch, range, hits, probe);
-      else if constexpr (decltype(k)::value == TriKernel::watertight)
-        mbvh_trace_rays<8, 8, TriKernel::watertight, ChildOrder::sort_always>(data8_, batch, range, hits, probe);
-      else mbvh_trace_rays<8, 8, decltype(k)::value>(data8_, batch, range, hits, probe);
+      data_.visit([&](const auto& d) {
+        constexpr TriKernel K = decltype(k)::value;
+        constexpr int W = std::decay_t<decltype(d)>::kW;
+        constexpr ChildOrder O = W == 8 && K == TriKernel::watertight ? ChildOrder::sort_always : ChildOrder::branching;
+        mbvh_trace_rays<8, W, K, O>(d, batch, range, hits, probe);
+      });
     });
   }
 
@@ -55,8 +53,7 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
   SchemeConfig cfg_;
   int tri_width_;
   MBVHBuildParams params_;
-  MBVHData<8, 4> data4_;
-  MBVHData<8, 8> data8_;
+  MBVHChoice<MBVHData<8, 4>, MBVHData<8, 8>> data_;
 };
 
 }  // namespace

@@ -2,6 +2,9 @@
 // from a resolved SchemeConfig, and the cached structure. Kept out of structures/mbvh.h so that
 // structures/ never parses a SchemeConfig (issue 15: layers point down).
 #pragma once
+#include <string>
+#include <variant>
+
 #include "structures/mbvh.h"
 #include "traversal/bvh_common.h"
 #include "traversal/traverser.h"
@@ -25,5 +28,23 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d);
 // MBVH and, for the scalar kernels, its triangles in lane order.
 template <int N, int W>
 MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel);
+
+// The MBVH of a scheme that offers two layouts by a parameter (mbvh8_single's tri_width,
+// mbvh_rs's width): it holds the one it runs, and `visit` hands that to a generic lambda (once per
+// trace call, outside the per-ray loop).
+template <class A, class B>
+struct MBVHChoice {
+  std::variant<A, B> data;
+  template <class F>
+  decltype(auto) visit(F&& f) const {
+    return std::visit(std::forward<F>(f), data);
+  }
+  std::string describe() const {
+    return visit([](const auto& d) { return d.mbvh->stats.describe(); });
+  }
+  size_t bytes(TriKernel k) const {
+    return visit([&](const auto& d) { return mbvh_bytes(d, k); });
+  }
+};
 
 }  // namespace tb

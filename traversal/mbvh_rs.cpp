@@ -48,22 +48,18 @@ class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
         params_(mbvh_params(cfg, width_ == 4 ? kDefaults4 : kDefaults8)) {}
   std::string_view name() const override { return "mbvh_rs"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
-    if (width_ == 4) data4_ = fetch_mbvh<4, 4>(scene, cache, params_, cfg_.kernel);
-    else data8_ = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
+    if (width_ == 4) data_.data = fetch_mbvh<4, 4>(scene, cache, params_, cfg_.kernel);
+    else data_.data = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
   }
-  std::string structure_info() const override {
-    return (width_ == 4 ? data4_.mbvh->stats.describe() : data8_.mbvh->stats.describe()) +
-           " stream=" + std::to_string(stream_);
-  }
-  size_t structure_bytes() const override {
-    return width_ == 4 ? mbvh_bytes(data4_, cfg_.kernel) : mbvh_bytes(data8_, cfg_.kernel);
-  }
+  std::string structure_info() const override { return data_.describe() + " stream=" + std::to_string(stream_); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     dispatch_kernel(cfg_.kernel, [&](auto k) {
-      if (width_ == 4) run_kernel<4, decltype(k)::value>(data4_, batch, range, hits, probe);
-      else run_kernel<8, decltype(k)::value>(data8_, batch, range, hits, probe);
+      data_.visit([&](const auto& d) {
+        run_kernel<std::decay_t<decltype(d)>::kN, decltype(k)::value>(d, batch, range, hits, probe);
+      });
     });
   }
 
@@ -141,8 +137,7 @@ class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
   int width_;
   int stream_;
   MBVHBuildParams params_;
-  MBVHData<4, 4> data4_;
-  MBVHData<8, 4> data8_;
+  MBVHChoice<MBVHData<4, 4>, MBVHData<8, 4>> data_;
 };
 
 }  // namespace

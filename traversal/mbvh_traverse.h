@@ -415,19 +415,10 @@ template <int N, int W, class P, class F>
 void mbvh_for_each_ray(const MBVH<N, W>& m, const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe,
                        F&& traverse) {
   std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
-  for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
-    const Ray& ray = batch.rays[i];
-    probe.read(&ray, sizeof(Ray));
-    if constexpr (P::enabled)
-      if (probe.counts) probe.counts->rays++;
+  for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
     const RayCtx rc(ray);
-    const NodeRay<N> nr(rc, ray.tmin);
-    const TriRay<W> tr(rc, ray.tmin);
-    Hit hit = initial_hit(ray);
-    traverse(nr, tr, rc, hit, stack.data());
-    hits[i] = finish_hit(hit);
-    probe.write(&hits[i], sizeof(Hit));
-  }
+    traverse(NodeRay<N>(rc, ray.tmin), TriRay<W>(rc, ray.tmin), rc, hit, stack.data());
+  });
 }
 
 // Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.

@@ -80,6 +80,32 @@ class TraverserBase : public Traverser {
   }
 };
 
+// Seeds a hit record: the search interval is [ray.tmin, ray.tmax).
+inline Hit initial_hit(const Ray& r) { return Hit{r.tmax, kNoHit, 0.f, 0.f}; }
+// Turns a search record into the reported hit: misses carry t = +inf.
+inline Hit finish_hit(Hit h) {
+  if (h.prim == kNoHit) h.t = INFINITY;
+  return h;
+}
+
+// The per-ray loop of every single-ray scheme: each ray of the packets in `range` is read
+// (probe), counted, and handed to `trace(ray, hit)` with `hit` seeded by initial_hit; the finished
+// hit is written to hits[i]. Inlined, so the timed path pays nothing for the lambda.
+template <class P, class F>
+[[gnu::always_inline]] inline void for_each_ray(const RayBatch& batch, PacketRange range, std::span<Hit> hits,
+                                                P& probe, F&& trace) {
+  for (uint32_t i = batch.packet_begin[range.first]; i < batch.packet_begin[range.last]; ++i) {
+    const Ray& ray = batch.rays[i];
+    probe.read(&ray, sizeof(Ray));
+    if constexpr (P::enabled)
+      if (probe.counts) probe.counts->rays++;
+    Hit hit = initial_hit(ray);
+    trace(ray, hit);
+    hits[i] = finish_hit(hit);
+    probe.write(&hits[i], sizeof(Hit));
+  }
+}
+
 // A traverser as the closest-hit function that workload generation takes (workloads/workload.h).
 inline auto closest_hits_of(const Traverser& t) {
   return [&t](const RayBatch& b, std::span<Hit> hits) { t.trace(b, PacketRange::all(b), hits); };
