@@ -34,20 +34,13 @@ std::string thesis_scheme8(const std::string& scheme) {
   if (scheme == "mbvh_rs") return "mbvh_rs";
   return "";
 }
-// Our scene -> the thesis' scene of the same geometry ("" when the thesis did not use it).
-std::string thesis_scene(const std::string& scene) {
-  for (const char* s : {"sponza", "sibenik_lucy", "conference"})
-    if (scene == s) return s;
-  return "";
-}
 
 }  // namespace
 
 int bounce_table(const TableOptions& opt) {
-  const std::string scene_arg = opt.scene.empty() ? "room" : opt.scene;
   const ThesisTable t7 = load_thesis_table("table07_schemes_by_bounce.csv");
-  const ThesisTable t8 = load_thesis_table("table08_10_rays_per_node.csv");
-  Bench bench(load_scene(scene_arg));
+  const ThesisRaysPerNode thesis_rays;
+  Bench bench(load_scene(table_scene(opt)));
   const std::string tscene = thesis_scene(bench.scene().name);
   const std::vector<std::string> workloads = {"primary", "bounce:1", "bounce:2", "bounce:3"};
   const std::vector<std::string> names =
@@ -75,14 +68,7 @@ int bounce_table(const TableOptions& opt) {
         v7 = t7.lookup({"scene", "scheme"}, {tscene, thesis_scheme7(name)}, dcol);
       if (v7) r.set("thesis_mrays", *v7);
       else r.set("thesis_mrays", "");
-      const std::string s8 = thesis_scheme8(name);
-      auto n8 = s8.empty() ? std::nullopt : t8.lookup({"table", "scheme", "node_kind"}, {"8", s8, "interior"}, dcol);
-      auto l8 = s8.empty() ? std::nullopt : t8.lookup({"table", "scheme", "node_kind"}, {"8", s8, "leaf"}, dcol);
-      r.set("thesis_rays_scene", n8 ? "modern_room" : "");
-      if (n8) r.set("thesis_rays_per_node", *n8);
-      else r.set("thesis_rays_per_node", "");
-      if (l8) r.set("thesis_rays_per_leaf", *l8);
-      else r.set("thesis_rays_per_leaf", "");
+      thesis_rays.set_columns(r, "8", thesis_scheme8(name), dcol);
       if (opt.run.progress)
         std::fprintf(stderr, "%-16s %-10s %9s Mrays/s (thesis %s)  rays/node %s  mismatch %s\n", name.c_str(),
                      workloads[depth].c_str(), r.get("mrays_median")->c_str(), r.get("thesis_mrays")->c_str(),
@@ -108,8 +94,7 @@ int bounce_table(const TableOptions& opt) {
     if (tv && tb && *tb > 0) r.set("thesis_vs_single", *tv / *tb);
     else r.set("thesis_vs_single", "");
   }
-  write_csv(opt.csv, records,
-            {{"command", "table bounce"}, {"scene", scene_arg}, {"thesis_scene", tscene}, {"seed", opt.run.seed}});
+  write_csv(opt.csv, records, thesis_table_meta("bounce", opt, tscene));
   print_table(records,
               {"scheme", "layout", "workload", "mrays_median", "thesis_mrays", "vs_single", "thesis_vs_single", "rays_per_node",
                "thesis_rays_per_node", "rays_per_leaf", "thesis_rays_per_leaf", "mismatch_rate"},

@@ -14,7 +14,7 @@ namespace tb {
 
 int cache_table(const TableOptions& opt) {
   const ThesisTable thesis = load_thesis_table("table11_cache_raygrid.csv");
-  Bench bench(load_scene(opt.scene.empty() ? "room" : opt.scene));
+  Bench bench(load_scene(table_scene(opt)));
   TableOptions o = opt;
   o.run.width = o.run.height = 512;  // the thesis' image size for Table 11
   const WorkloadSpec spec = table_spec(o, "bounce:2");

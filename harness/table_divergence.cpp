@@ -30,8 +30,7 @@ std::string thesis_scene_of(const std::string& scene_name) {
 }  // namespace
 
 int divergence_table(const TableOptions& opt) {
-  const std::string scene_arg = opt.scene.empty() ? "room" : opt.scene;
-  Bench bench(load_scene(scene_arg));
+  Bench bench(load_scene(table_scene(opt)));
   const std::string thesis_scene = thesis_scene_of(bench.scene().name);
   const ThesisTable thesis = load_thesis_table("table02-04_packet_divergence_cpu.csv");
   const std::vector<std::string> scheme_names = default_schemes(
@@ -89,14 +88,11 @@ int divergence_table(const TableOptions& opt) {
     }
   }
   write_csv(opt.csv, records,
-            {{"command", "table divergence"},
-             {"scene", scene_arg},
-             {"thesis_scene", thesis_scene},
-             {"width", opt.run.width},
-             {"height", opt.run.height},
-             {"reps", opt.run.reps},
-             {"seed", opt.run.seed},
-             {"note", "thesis: Bikker 2012 Tables 2-4, ranged BVH packets, 1280x800, 1 core Xeon 3.4 GHz"}});
+            thesis_table_meta("divergence", opt, thesis_scene,
+                              {{"width", opt.run.width},
+                               {"height", opt.run.height},
+                               {"reps", opt.run.reps},
+                               {"note", "thesis: Bikker 2012 Tables 2-4, ranged BVH packets, 1280x800, 1 core Xeon 3.4 GHz"}}));
   print_table(records, {"view", "divergence", "scheme", "mrays_median", "pct_of_d1", "thesis_mrays", "thesis_pct_of_d1",
                         "mismatch_rate", "false_miss", "false_hit"},
               stdout);

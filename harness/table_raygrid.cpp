@@ -36,12 +36,6 @@ std::string thesis_scheme9(const std::string& scheme) {
   auto it = m.find(scheme);
   return it == m.end() ? "" : it->second;
 }
-// Our scene -> the thesis' scene of the same geometry.
-std::string thesis_scene(const std::string& scene) {
-  for (const char* s : {"sponza", "sibenik_lucy", "conference"})
-    if (scene == s) return s;
-  return "";
-}
 std::string fmt(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.1f", v);
@@ -68,10 +62,9 @@ void raygrid_columns(Record& r, const Traverser& t) {
 }  // namespace
 
 int raygrid_table(const TableOptions& opt) {
-  const std::string scene_arg = opt.scene.empty() ? "room" : opt.scene;
   const ThesisTable t9 = load_thesis_table("table09_raygrid_by_bounce.csv");
-  const ThesisTable t10 = load_thesis_table("table08_10_rays_per_node.csv");
-  Bench bench(load_scene(scene_arg));
+  const ThesisRaysPerNode thesis_rays;
+  Bench bench(load_scene(table_scene(opt)));
   const std::string tscene = thesis_scene(bench.scene().name);
   // The table's own parameter; the others are the schemes'.
   const ParamSpec sweep_param = bool_param("sweep", false, "also run the queue-size sweep of thesis 5.3.5 on bounce:3");
@@ -105,15 +98,7 @@ int raygrid_table(const TableOptions& opt) {
       if (v9) r.set("thesis_mrays", *v9);
       else r.set("thesis_mrays", "");
       // Table 10 (RayGrid) and Table 8 (MBVH/RS): depth k = k-th bounce; Modern Room only.
-      const std::string tab = name == "raygrid" ? "10" : name == "mbvh_rs" ? "8" : "";
-      const std::string dcol = "depth" + std::to_string(k);
-      auto n10 = tab.empty() ? std::nullopt : t10.lookup({"table", "scheme", "node_kind"}, {tab, name, "interior"}, dcol);
-      auto l10 = tab.empty() ? std::nullopt : t10.lookup({"table", "scheme", "node_kind"}, {tab, name, "leaf"}, dcol);
-      r.set("thesis_rays_scene", n10 ? "modern_room" : "");
-      if (n10) r.set("thesis_rays_per_node", *n10);
-      else r.set("thesis_rays_per_node", "");
-      if (l10) r.set("thesis_rays_per_leaf", *l10);
-      else r.set("thesis_rays_per_leaf", "");
+      thesis_rays.set_columns(r, name == "raygrid" ? "10" : name == "mbvh_rs" ? "8" : "", name, "depth" + std::to_string(k));
       raygrid_columns(r, *t);
       if (opt.run.progress)
         std::fprintf(stderr, "%-14s bounce:%d %9s Mrays/s (thesis %s)  rays/node %s  rays/leaf %s  mismatch %s\n",
@@ -171,12 +156,9 @@ int raygrid_table(const TableOptions& opt) {
   }
 
   write_csv(opt.csv, records,
-            {{"command", "table raygrid"},
-             {"scene", scene_arg},
-             {"thesis_scene", tscene},
-             {"seed", opt.run.seed},
-             {"note", "thesis_rays_per_node/leaf: Table 10 (raygrid) and Table 8 (mbvh_rs), measured on the "
-                      "Modern Room only; thesis_mrays: Table 9, 1 core of a 3.8 GHz Xeon (2012)"}});
+            thesis_table_meta("raygrid", opt, tscene,
+                              {{"note", "thesis_rays_per_node/leaf: Table 10 (raygrid) and Table 8 (mbvh_rs), measured "
+                                        "on the Modern Room only; thesis_mrays: Table 9, 1 core of a 3.8 GHz Xeon (2012)"}}));
   const std::vector<Record> main(records.begin(), records.begin() + long(main_rows));
   print_table(main,
               {"scheme", "layout", "workload", "mrays_median", "pct_over_single", "thesis_mrays", "thesis_pct_over_single",

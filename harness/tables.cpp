@@ -52,6 +52,18 @@ std::string thesis_layout(const std::string& scheme, SchemeConfig& cfg) {
   return label;
 }
 
+std::string table_scene(const TableOptions& opt) { return opt.scene.empty() ? "room" : opt.scene; }
+
+nlohmann::json thesis_table_meta(const std::string& table, const TableOptions& opt, const std::string& thesis_scene,
+                                 const nlohmann::json& extra) {
+  nlohmann::json meta = {{"command", "table " + table},
+                         {"scene", table_scene(opt)},
+                         {"thesis_scene", thesis_scene},
+                         {"seed", opt.run.seed}};
+  meta.update(extra);
+  return meta;
+}
+
 WorkloadSpec table_spec(const TableOptions& opt, const std::string& workload, uint32_t view) {
   WorkloadSpec spec = parse_workload(workload);
   spec.width = opt.run.width;

@@ -22,6 +22,12 @@ std::vector<std::string> table_names();
 // each scheme is then made with config_for(name, ...), so it sees only the keys it declares.
 std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback = {},
                                          const ParamSpecs& table_params = {});
+// The scene a table runs on: --scene, else the built-in room.
+std::string table_scene(const TableOptions& opt);
+// The sidecar fields of a table compared with the thesis: the command, the scene asked for, the
+// thesis' scene it is compared with ("" for none) and the seed, then the table's own `extra`.
+nlohmann::json thesis_table_meta(const std::string& table, const TableOptions& opt, const std::string& thesis_scene,
+                                 const nlohmann::json& extra = nlohmann::json::object());
 // A workload spec with the table's image size and seed.
 WorkloadSpec table_spec(const TableOptions& opt, const std::string& workload, uint32_t view = 0);
 // The thesis' layout for the stream schemes of Tables 7-10: mbvh_rs and raygrid default to 8-wide

@@ -12,6 +12,27 @@
 
 namespace tb {
 
+void ThesisRaysPerNode::set_columns(Record& r, const std::string& table, const std::string& scheme,
+                                    const std::string& depth_col) const {
+  auto value = [&](const char* node_kind) {
+    return table.empty() || scheme.empty()
+               ? std::nullopt
+               : t_.lookup({"table", "scheme", "node_kind"}, {table, scheme, node_kind}, depth_col);
+  };
+  const std::optional<double> node = value("interior"), leaf = value("leaf");
+  r.set("thesis_rays_scene", node ? "modern_room" : "");
+  if (node) r.set("thesis_rays_per_node", *node);
+  else r.set("thesis_rays_per_node", "");
+  if (leaf) r.set("thesis_rays_per_leaf", *leaf);
+  else r.set("thesis_rays_per_leaf", "");
+}
+
+std::string thesis_scene(const std::string& scene) {
+  for (const char* s : {"sponza", "sibenik_lucy", "conference"})
+    if (scene == s) return s;
+  return "";
+}
+
 std::optional<double> ThesisTable::lookup(const std::vector<std::string>& key_cols,
                                           const std::vector<std::string>& key_vals, const std::string& col) const {
   auto index = [&](const std::string& c) {

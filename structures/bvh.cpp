@@ -344,12 +344,7 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
   for (uint32_t i = 0; i < n; ++i) bvh.prim_index[i] = refs[i].id();
   bvh.nodes.resize(b.next_node.load());
   bvh.stats.max_depth = b.max_depth.load();
-  bvh.stats.nodes = uint32_t(bvh.nodes.size() - 1);
-  for (size_t i = 0; i < bvh.nodes.size(); ++i)
-    if (i != 1 && bvh.nodes[i].is_leaf()) bvh.stats.leaves++;
-  bvh.stats.bytes = bvh.nodes.size() * sizeof(BVHNode) + bvh.prim_index.size() * sizeof(uint32_t);
-  bvh.stats.sah_cost = bvh.compute_sah_cost(p);
-  bvh.stats.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  bvh.finish_stats(p, t0);
   return bvh;
 }
 
@@ -428,6 +423,16 @@ void BVH::refit(const Scene& scene, int threads) {
     nd.hi = b.hi;
   };
   if (!nodes.empty()) rec(rec, 0, 0);
+}
+
+void BVH::finish_stats(const BVHBuildParams& params, std::chrono::steady_clock::time_point start) {
+  stats.nodes = uint32_t(nodes.size() - 1);  // nodes[1] is padding
+  stats.leaves = 0;
+  for (size_t i = 0; i < nodes.size(); ++i)
+    if (i != 1 && nodes[i].is_leaf()) stats.leaves++;
+  stats.bytes = nodes.size() * sizeof(BVHNode) + prim_index.size() * sizeof(uint32_t);
+  stats.sah_cost = compute_sah_cost(params);
+  stats.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
 double BVH::compute_sah_cost(const BVHBuildParams& p) const {

@@ -9,6 +9,7 @@
 // clipped to the leaf (structures/clip.h). Wide layouts come from the one collapse of such a tree
 // (MBVH::collapse, structures/mbvh.h).
 #pragma once
+#include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <span>
@@ -88,6 +89,9 @@ struct BVH {
   // Recomputes every box bottom-up for moved vertices, keeping the topology (thesis Table 1).
   void refit(const Scene& scene, int threads = 1);
   double compute_sah_cost(const BVHBuildParams& params) const;
+  // Fills `stats` from the finished tree, all but max_depth (which only the builder knows), the
+  // build time counted from `start`: the last step of both builders (binned SAH, spatial splits).
+  void finish_stats(const BVHBuildParams& params, std::chrono::steady_clock::time_point start);
 };
 
 }  // namespace tb

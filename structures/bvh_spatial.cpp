@@ -382,12 +382,7 @@ BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BV
   const auto t0 = std::chrono::steady_clock::now();
   const size_t n = refs.size();
   BVH bvh = SpatialBuilder(scene, params, sp, n).run(std::move(refs));
-  bvh.stats.nodes = uint32_t(bvh.nodes.size() - 1);
-  for (size_t i = 0; i < bvh.nodes.size(); ++i)
-    if (i != 1 && bvh.nodes[i].is_leaf()) bvh.stats.leaves++;
-  bvh.stats.bytes = bvh.nodes.size() * sizeof(BVHNode) + bvh.prim_index.size() * sizeof(uint32_t);
-  bvh.stats.sah_cost = bvh.compute_sah_cost(params);
-  bvh.stats.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  bvh.finish_stats(params, t0);
   return bvh;
 }
 

@@ -1,7 +1,5 @@
 #include "structures/cwbvh.h"
 
-#include <immintrin.h>
-
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -13,14 +11,6 @@
 namespace tb {
 
 namespace {
-
-// Every tracing thread runs with FTZ/DAZ (harness/trace_runner); the decode checks run in the
-// same mode so that a decoded coordinate near zero rounds as it will in the traversal.
-struct FlushDenormals {
-  unsigned saved = _mm_getcsr();
-  FlushDenormals() { _mm_setcsr(saved | 0x8040); }
-  ~FlushDenormals() { _mm_setcsr(saved); }
-};
 
 // volatile-free but opaque to constant folding across the MXCSR change: the operations the
 // traversal performs, in float.

@@ -20,6 +20,8 @@
 // large as the MBVH8's. Unused slots decode to boxes with lo > hi on every axis, which no ray
 // enters.
 #pragma once
+#include <xmmintrin.h>
+
 #include <bit>
 #include <cstdint>
 #include <string>
@@ -73,5 +75,17 @@ int8_t cw_exponent(float p, float hi_max);
 uint8_t cw_quantize_lo(float p, float s, float lo);
 uint8_t cw_quantize_hi(float p, float s, float hi);
 float cw_decode(float p, float s, uint8_t q);
+
+// Flush-to-zero and denormals-are-zero for the calling thread while in scope. Every tracing thread
+// runs with FTZ/DAZ (harness/trace_runner); the builder's decode checks, child_box and the tests
+// of the cw_* functions run in the same mode so that a decoded coordinate near zero rounds as it
+// will in the traversal.
+struct FlushDenormals {
+  unsigned saved = _mm_getcsr();
+  FlushDenormals() { _mm_setcsr(saved | 0x8040); }  // FTZ (bit 15) | DAZ (bit 6)
+  ~FlushDenormals() { _mm_setcsr(saved); }
+  FlushDenormals(const FlushDenormals&) = delete;
+  FlushDenormals& operator=(const FlushDenormals&) = delete;
+};
 
 }  // namespace tb

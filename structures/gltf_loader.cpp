@@ -21,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <type_traits>
 
 #include "structures/scene_loader.h"
 
@@ -192,26 +193,24 @@ T load_unaligned(const unsigned char* p) {
   return v;
 }
 
+// An integer component; normalised, it maps to [0,1] (unsigned) or [-1,1] (signed: the spec divides
+// by the largest value and clamps the one below -1, e.g. -128 / 127).
+template <class T>
+double read_integer(const unsigned char* p, bool normalized) {
+  const double v = load_unaligned<T>(p);
+  if (!normalized) return v;
+  const double scaled = v / std::numeric_limits<T>::max();
+  return std::is_signed_v<T> ? std::max(scaled, -1.0) : scaled;
+}
+
 // One component as a number; normalised integers map to [0,1] / [-1,1] (KHR_mesh_quantization).
 double read_component(const unsigned char* p, int type, bool normalized) {
   switch (type) {
     case TINYGLTF_COMPONENT_TYPE_FLOAT: return load_unaligned<float>(p);
-    case TINYGLTF_COMPONENT_TYPE_BYTE: {
-      double v = load_unaligned<int8_t>(p);
-      return normalized ? std::max(v / 127.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
-      double v = load_unaligned<uint8_t>(p);
-      return normalized ? v / 255.0 : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_SHORT: {
-      double v = load_unaligned<int16_t>(p);
-      return normalized ? std::max(v / 32767.0, -1.0) : v;
-    }
-    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-      double v = load_unaligned<uint16_t>(p);
-      return normalized ? v / 65535.0 : v;
-    }
+    case TINYGLTF_COMPONENT_TYPE_BYTE: return read_integer<int8_t>(p, normalized);
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return read_integer<uint8_t>(p, normalized);
+    case TINYGLTF_COMPONENT_TYPE_SHORT: return read_integer<int16_t>(p, normalized);
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return read_integer<uint16_t>(p, normalized);
     default: return 0;  // rejected before reading
   }
 }

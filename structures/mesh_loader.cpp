@@ -116,6 +116,23 @@ std::string quote(std::string_view s) {
 
 std::string at_line(size_t line) { return "line " + std::to_string(line) + ": "; }
 
+// The x y z that start the rest of an OBJ or OFF vertex line, each a finite float (what follows
+// them is the caller's). `number` is the vertex as the format counts it (OBJ from 1, OFF from 0);
+// `short_hint` ends the message for a line with fewer than three values.
+Vec3 parse_vertex(Tokens& t, const std::string& path, size_t line, size_t number, const char* short_hint) {
+  Vec3 p;
+  std::string_view tok;
+  for (int c = 0; c < 3; ++c) {
+    if (!t.next(tok))
+      throw InputError(error_line(path, at_line(line) + "vertex needs three coordinates" + short_hint));
+    if (!parse_float(tok, p[c]))
+      throw InputError(error_line(path, at_line(line) + "vertex coordinate " + quote(tok) + " is not a number"));
+  }
+  if (!is_finite(p))
+    throw InputError(error_line(path, at_line(line) + "vertex " + std::to_string(number) + " has a NaN or Inf coordinate"));
+  return p;
+}
+
 // Triangle count guard: ids are uint32 and 0xFFFFFFFF means "no hit".
 constexpr size_t kMaxElements = 0xFFFFFFFEull;
 
@@ -139,17 +156,8 @@ Scene parse_obj(const std::string& path, const std::string& data) {
     Tokens t(line);
     if (!t.next(tok)) continue;
     if (tok == "v") {
-      Vec3 p;
-      for (int c = 0; c < 3; ++c) {
-        if (!t.next(tok))
-          throw InputError(error_line(path, at_line(lines.line) + "vertex needs three coordinates (truncated file?)"));
-        if (!parse_float(tok, p[c]))
-          throw InputError(error_line(path, at_line(lines.line) + "vertex coordinate " + quote(tok) + " is not a number"));
-      }
       // Extra values (w, or the r g b some exporters append) carry no geometry.
-      if (!is_finite(p))
-        throw InputError(error_line(path, at_line(lines.line) + "vertex " + std::to_string(s.positions.size() + 1) +
-                                              " has a NaN or Inf coordinate"));
+      const Vec3 p = parse_vertex(t, path, lines.line, s.positions.size() + 1, " (truncated file?)");
       if (s.positions.size() >= kMaxElements) throw InputError(error_line(path, "more than 2^32-2 vertices"));
       s.positions.push_back(p);
     } else if (tok == "f") {
@@ -274,16 +282,8 @@ Scene parse_off(const std::string& path, const std::string& data) {
       throw InputError(error_line(path, "file ends after " + std::to_string(v) + " of " + std::to_string(nv) +
                                             " vertices (truncated?)"));
     Tokens vt(line);
-    Vec3 p;
-    for (int c = 0; c < 3; ++c) {
-      if (!vt.next(tok))
-        throw InputError(error_line(path, at_line(lines.line) + "vertex needs three coordinates"));
-      if (!parse_float(tok, p[c]))
-        throw InputError(error_line(path, at_line(lines.line) + "vertex coordinate " + quote(tok) + " is not a number"));
-    }
-    if (!is_finite(p))
-      throw InputError(error_line(path, at_line(lines.line) + "vertex " + std::to_string(v) + " has a NaN or Inf coordinate"));
-    s.positions.push_back(p);
+    // The vertex count names a truncation already ("file ends after ..."), so no hint here.
+    s.positions.push_back(parse_vertex(vt, path, lines.line, static_cast<size_t>(v), ""));
   }
   std::vector<uint32_t> face;
   for (long long f = 0; f < nf; ++f) {

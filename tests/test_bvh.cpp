@@ -7,24 +7,13 @@
 
 #include "structures/bvh.h"
 #include "structures/clip.h"
+#include "test_geometry.h"
 #include "test_util.h"
 
 namespace tb {
 namespace {
 
-Scene random_triangles(uint32_t n, uint32_t seed) {
-  Scene s;
-  s.name = "random";
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> U(-10.f, 10.f), E(-0.5f, 0.5f);
-  for (uint32_t i = 0; i < n; ++i) {
-    Vec3 c{U(rng), U(rng), U(rng)};
-    for (int k = 0; k < 3; ++k) s.positions.push_back(c + Vec3{E(rng), E(rng), E(rng)});
-    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
-  }
-  s.ensure_views();
-  return s;
-}
+using test::random_triangles;
 
 // Every expected primitive exactly once (no other), boxes nested, each leaf's box holding its
 // primitives' boxes, leaves within the size limit. `box_of(id)` is the box the build was given.

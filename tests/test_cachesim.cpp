@@ -49,9 +49,16 @@ std::string input_error(const std::function<void()>& f) {
 const std::vector<uint64_t> kDineroTrace = {0x1000, 0x2000, 0x3000, 0x4000, 0x5000, 0x6000, 0x7000,
                                             0x8000, 0x9000, 0x8000, 0x1000, 0x2000, 0x4000};
 
-const cs::LevelCounters& replay_dinero(cs::Hierarchy& h) {
+// Replays the trace through that cache under `policy` and checks the read counters that each
+// test below derives by hand; returns the hierarchy for the policy's own checks.
+cs::Hierarchy replay_dinero(cs::Policy policy, uint64_t read_misses, uint64_t read_hits, uint64_t evictions) {
+  cs::Hierarchy h = single_level(32 << 10, 8, policy);
   for (uint64_t a : kDineroTrace) h.access(a, 4, false);
-  return h.counters(0);
+  const cs::LevelCounters& c = h.counters(0);
+  EXPECT_EQ(c.read_misses, read_misses);
+  EXPECT_EQ(c.read_hits, read_hits);
+  EXPECT_EQ(c.evictions, evictions);
+  return h;
 }
 
 }  // namespace
@@ -59,12 +66,8 @@ const cs::LevelCounters& replay_dinero(cs::Hierarchy& h) {
 // LRU: 8 cold misses fill the set; 0x9000 evicts 0x1000; 0x8000 hits; 0x1000 misses and evicts the
 // then-oldest 0x2000; 0x2000 misses and evicts 0x3000; 0x4000 hits. 11 misses, 3 evictions.
 TEST(CacheSim, DineroTraceLru) {
-  cs::Hierarchy h = single_level(32 << 10, 8, cs::Policy::LRU);
-  const cs::LevelCounters& c = replay_dinero(h);
-  EXPECT_EQ(c.read_misses, 11u);
-  EXPECT_EQ(c.read_hits, 2u);
-  EXPECT_EQ(c.evictions, 3u);
-  EXPECT_EQ(c.writebacks, 0u);
+  const cs::Hierarchy h = replay_dinero(cs::Policy::LRU, /*read_misses=*/11, /*read_hits=*/2, /*evictions=*/3);
+  EXPECT_EQ(h.counters(0).writebacks, 0u);
   EXPECT_EQ(h.memory_reads(), 11u);
   EXPECT_EQ(cs::format_report(h),
             "L1 reads=13 writes=0 hits=2 misses=11 read_misses=11 write_misses=0 evictions=3 writebacks=0\n"
@@ -77,22 +80,15 @@ TEST(CacheSim, DineroTraceLru) {
 // so 0x1000 replaces way 2 (0x3000, not the LRU line 0x2000); 0x2000 (way 4) and 0x4000 (way 6)
 // then hit. 10 misses, 2 evictions.
 TEST(CacheSim, DineroTraceTreePlru) {
-  cs::Hierarchy h = single_level(32 << 10, 8, cs::Policy::TreePLRU);
-  const cs::LevelCounters& c = replay_dinero(h);
-  EXPECT_EQ(c.read_misses, 10u);
-  EXPECT_EQ(c.read_hits, 3u);
-  EXPECT_EQ(c.evictions, 2u);
+  const cs::Hierarchy h = replay_dinero(cs::Policy::TreePLRU, /*read_misses=*/10, /*read_hits=*/3, /*evictions=*/2);
   EXPECT_TRUE(h.level(0).contains(0x2000 >> 6));
   EXPECT_FALSE(h.level(0).contains(0x3000 >> 6));
 }
 
 // Bit-PLRU: filling way 7 sets all MRU bits, so only way 7's survives; 0x9000 replaces way 0,
-// 0x1000 way 1 (0x2000), 0x2000 way 2 (0x3000); 0x8000 and 0x4000 hit. 11 misses.
+// 0x1000 way 1 (0x2000), 0x2000 way 2 (0x3000); 0x8000 and 0x4000 hit. 11 misses, 3 evictions.
 TEST(CacheSim, DineroTraceBitPlru) {
-  cs::Hierarchy h = single_level(32 << 10, 8, cs::Policy::BitPLRU);
-  const cs::LevelCounters& c = replay_dinero(h);
-  EXPECT_EQ(c.read_misses, 11u);
-  EXPECT_EQ(c.evictions, 3u);
+  replay_dinero(cs::Policy::BitPLRU, /*read_misses=*/11, /*read_hits=*/2, /*evictions=*/3);
 }
 
 // The textbook LRU pathology: cycling through assoc+1 lines of one set evicts each line just before

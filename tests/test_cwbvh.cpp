@@ -2,8 +2,6 @@
 // contain the true boxes (offsets up to 1e6, flat and near-zero children, flush-to-zero mode as
 // in the traversal), unused slots can never be entered, the compressed tree has the MBVH8's
 // topology and leaves, and its nodes take at most 0.35x the MBVH8's bytes.
-#include <immintrin.h>
-
 #include <random>
 
 #include "structures/builtin_scenes.h"
@@ -13,14 +11,8 @@
 namespace tb {
 namespace {
 
-struct Ftz {
-  unsigned saved = _mm_getcsr();
-  Ftz() { _mm_setcsr(saved | 0x8040); }
-  ~Ftz() { _mm_setcsr(saved); }
-};
-
 TEST(CWBVH, QuantizationIsConservative) {
-  const Ftz ftz;
+  const FlushDenormals ftz;
   std::mt19937 rng(5);
   for (float offset : {0.f, 1e-38f, 1.f, 1e5f, -1e5f, 1e6f, -1e6f, 3e7f}) {
     for (float size : {0.f, 1e-30f, 1e-6f, 1e-3f, 1.f, 100.f, 1e5f}) {

@@ -1,11 +1,44 @@
-// Geometry the structure tests check against, written independently of the structures' own code.
+// Geometry the structure tests check against, written independently of the structures' own code,
+// and the random scenes they build over.
 #pragma once
 #include <algorithm>
 #include <cmath>
+#include <random>
 
+#include "structures/scene.h"
 #include "structures/vec3.h"
 
 namespace tb::test {
+
+// Where random_triangles puts its triangles: centres uniform in [-spread, spread]^3 plus offset,
+// each corner within +-size of its centre per axis. With huge_every > 0, every huge_every-th
+// triangle (from the first) is huge instead: its corners anywhere in [-huge_spread, huge_spread]^3
+// plus offset, so that it crosses many cells of a structure.
+struct RandomTriangles {
+  float spread = 10.f;
+  float size = 0.5f;
+  Vec3 offset = {0, 0, 0};
+  uint32_t huge_every = 0;
+  float huge_spread = 8.f;
+};
+
+// n separate triangles (no shared vertices, ids in creation order), the same for a seed.
+inline Scene random_triangles(uint32_t n, uint32_t seed, const RandomTriangles& shape = {}) {
+  Scene s;
+  s.name = "random";
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(-shape.spread, shape.spread), E(-shape.size, shape.size),
+      B(-shape.huge_spread, shape.huge_spread);
+  for (uint32_t i = 0; i < n; ++i) {
+    const Vec3 c = Vec3{U(rng), U(rng), U(rng)} + shape.offset;
+    const bool huge = shape.huge_every && i % shape.huge_every == 0;
+    for (int k = 0; k < 3; ++k)
+      s.positions.push_back(huge ? Vec3{B(rng), B(rng), B(rng)} + shape.offset : c + Vec3{E(rng), E(rng), E(rng)});
+    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
+  }
+  s.ensure_views();
+  return s;
+}
 
 // Independent closed triangle / closed box overlap: the separating axis theorem (Akenine-Moller
 // 2001) in double — the box's three axes, the triangle normal, and the nine edge x axis

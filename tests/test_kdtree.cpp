@@ -8,6 +8,7 @@
 
 #include "structures/clip.h"
 #include "structures/kdtree.h"
+#include "test_geometry.h"
 #include "test_util.h"
 #include "traversal/kd_common.h"
 #include "workloads/hard_cases.h"
@@ -17,19 +18,7 @@ namespace {
 
 // ---- scenes ---------------------------------------------------------------------------------
 
-Scene random_triangles(uint32_t n, uint32_t seed, float size = 0.5f, Vec3 offset = {0, 0, 0}) {
-  Scene s;
-  s.name = "random";
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> U(-10.f, 10.f), E(-size, size);
-  for (uint32_t i = 0; i < n; ++i) {
-    const Vec3 c = Vec3{U(rng), U(rng), U(rng)} + offset;
-    for (int k = 0; k < 3; ++k) s.positions.push_back(c + Vec3{E(rng), E(rng), E(rng)});
-    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
-  }
-  s.ensure_views();
-  return s;
-}
+using test::random_triangles;
 
 // Axis-aligned triangles on an integer lattice: many lie exactly in candidate split planes,
 // share planes with cell faces, and touch each other along edges and at vertices.
@@ -235,7 +224,7 @@ TEST(KDTree, NodeLayoutIsEightBytes) {
 
 TEST(KDTree, InvariantsOnRandomTriangles) {
   for (uint32_t seed : {1u, 2u, 3u}) {
-    const Scene s = random_triangles(1500, seed, seed == 3 ? 4.f : 0.5f);
+    const Scene s = random_triangles(1500, seed, {.size = seed == 3 ? 4.f : 0.5f});
     const KDTree kd = KDTree::build(s);
     check_kdtree(s, kd);
     EXPECT_GT(kd.stats.leaves, 1u);
@@ -287,7 +276,7 @@ TEST(KDTree, InvariantsOnFlatAndDegenerateScenes) {
 
 TEST(KDTree, InvariantsAtHugeOffsets) {
   for (float off : {1e5f, 1e6f}) {
-    const Scene s = random_triangles(1200, 11, 0.5f, {off, -off, 0.5f * off});
+    const Scene s = random_triangles(1200, 11, {.offset = {off, -off, 0.5f * off}});
     check_kdtree(s, KDTree::build(s));
     const Scene l = [&] {
       Scene t = lattice_triangles(800, 12);
@@ -342,7 +331,7 @@ TEST(KDTree, ParametersShapeTheTree) {
 
 TEST(KDTree, BuildsTwoHundredThousandTriangles) {
   // O(N log N) event sorting: 200k triangles must build (no timing assertion; about a second).
-  const Scene s = random_triangles(200000, 31, 0.2f);
+  const Scene s = random_triangles(200000, 31, {.size = 0.2f});
   const KDTree kd = KDTree::build(s);
   EXPECT_GT(kd.stats.leaves, 10000u);
   EXPECT_GE(kd.stats.references, s.num_triangles());
@@ -393,12 +382,7 @@ void expect_matches_reference(Bench& bench, RayBatch b, const std::string& what,
   }
 }
 
-Bench& bench_for(const std::string& scene) {
-  static std::map<std::string, std::unique_ptr<Bench>> benches;
-  auto& b = benches[scene];
-  if (!b) b = std::make_unique<Bench>(load_scene(scene));
-  return *b;
-}
+using test::bench_for;
 
 TEST(KDTraversal, MatchesReferenceOnAllWorkloadsAndViews) {
   // test_schemes covers view 0 at 96x96; here the other two views, smaller images.

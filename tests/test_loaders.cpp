@@ -16,6 +16,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "structures/scene_loader.h"
@@ -66,6 +67,17 @@ void expect_input_error(const std::string& path, const std::string& needle) {
   } catch (const std::exception& e) {
     ADD_FAILURE() << "wrong exception type: " << e.what();
   }
+}
+
+// A one-spot corruption of a good file: `len` bytes, from `skip` bytes after the first `anchor`,
+// become `with`.
+std::string edited(std::string text, std::string_view anchor, size_t skip, size_t len, std::string_view with) {
+  const size_t at = text.find(anchor);
+  if (at == std::string::npos) {
+    ADD_FAILURE() << "'" << anchor << "' is not in the file to corrupt";
+    return text;
+  }
+  return text.replace(at + skip, len, with);
 }
 
 std::array<Vec3, 3> corners(const Scene& s, size_t t) {
@@ -421,24 +433,28 @@ TEST_F(LoaderTest, PlyBadInput) {
                      "truncated");
   const std::string bin = ply_binary(false);
   expect_input_error(write("truncbin.ply", bin.substr(0, bin.size() - 5)), "truncated");
-  std::string oor = kPlyAsciiHeader + ply_ascii_body();
-  oor.replace(oor.rfind("3 4 3 2"), 7, "3 4 3 9");
-  expect_input_error(write("oor.ply", oor), "uses vertex index 9 but there are 5 vertices");
-  std::string nan_ascii = kPlyAsciiHeader + ply_ascii_body();
-  nan_ascii.replace(nan_ascii.find("end_header\n") + 11, 1, "nan");
-  expect_input_error(write("nanascii.ply", nan_ascii), "vertex 0 has a NaN or Inf");
-  std::string word = kPlyAsciiHeader + ply_ascii_body();
-  word.replace(word.find("end_header\n") + 11, 1, "zero");
-  expect_input_error(write("word.ply", word), "'zero' is not a number");
-  std::string neglist = kPlyAsciiHeader + ply_ascii_body();
-  neglist.replace(neglist.rfind("3 4 3 2"), 1, "-4");
-  expect_input_error(write("neglist.ply", neglist), "list length -4 is negative");
-  std::string longlist = kPlyAsciiHeader + ply_ascii_body();
-  longlist.replace(longlist.rfind("3 4 3 2"), 1, "200");
-  expect_input_error(write("longlist.ply", longlist), "longer than the rest of the file");
-  std::string shortface = kPlyAsciiHeader + ply_ascii_body();
-  shortface.replace(shortface.rfind("3 4 3 2"), 7, "2 4 3  ");
-  expect_input_error(write("shortface.ply", shortface), "face 1 has 2 vertices");
+  // One-spot corruptions of the good ASCII file ("3 4 3 2" is its last face, "end_header\n" + 11
+  // the first vertex's x).
+  struct Edit {
+    const char* file;
+    std::string_view anchor;
+    size_t skip, len;
+    std::string_view with;
+    const char* needle;
+  };
+  const Edit edits[] = {
+      {"oor.ply", "3 4 3 2", 0, 7, "3 4 3 9", "uses vertex index 9 but there are 5 vertices"},
+      {"nanascii.ply", "end_header\n", 11, 1, "nan", "vertex 0 has a NaN or Inf"},
+      {"word.ply", "end_header\n", 11, 1, "zero", "'zero' is not a number"},
+      {"neglist.ply", "3 4 3 2", 0, 1, "-4", "list length -4 is negative"},
+      {"longlist.ply", "3 4 3 2", 0, 1, "200", "longer than the rest of the file"},
+      {"shortface.ply", "3 4 3 2", 0, 7, "2 4 3  ", "face 1 has 2 vertices"},
+      // Header corruption: OpenMesh's own header parser loops forever on these.
+      {"version.ply", "1.0", 0, 1, {"\0", 1}, "control character in the header"},
+      {"count.ply", "vertex 5", 0, 8, "vertex x", "malformed element declaration"},
+      {"keyword.ply", "property float y", 0, 8, "prperty ", "unknown keyword 'prperty'"},
+  };
+  for (const Edit& e : edits) expect_input_error(write(e.file, edited(good, e.anchor, e.skip, e.len, e.with)), e.needle);
   std::string nan_bin = ply_binary(false);
   const float qnan = std::numeric_limits<float>::quiet_NaN();
   std::memcpy(&nan_bin[nan_bin.find("end_header\n") + 11 + 20 + 4], &qnan, 4);  // vertex 1, y
@@ -453,16 +469,6 @@ TEST_F(LoaderTest, PlyBadInput) {
                            "ply\nformat ascii 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\n"
                            "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"),
                      "more than the 0-byte body");
-  // Header corruption: OpenMesh's own header parser loops forever on these.
-  std::string version = kPlyAsciiHeader + ply_ascii_body();
-  version[version.find("1.0")] = '\0';
-  expect_input_error(write("version.ply", version), "control character in the header");
-  std::string count = kPlyAsciiHeader + ply_ascii_body();
-  count.replace(count.find("vertex 5"), 8, "vertex x");
-  expect_input_error(write("count.ply", count), "malformed element declaration");
-  std::string kw = kPlyAsciiHeader + ply_ascii_body();
-  kw.replace(kw.find("property float y"), 8, "prperty ");
-  expect_input_error(write("keyword.ply", kw), "unknown keyword 'prperty'");
   expect_input_error(write("fmt.ply", "ply\nformat ascii 2.0\nend_header\n"), "PLY header line 2");
   expect_input_error(write("noxyz.ply",
                            "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nelement face 1\n"
@@ -485,12 +491,8 @@ TEST_F(LoaderTest, OpenMeshPathReportsBadPly) {
   expect_om_error("trunc.ply", good.substr(0, good.size() - 8), "truncated");
   const std::string bin = ply_binary(false);
   expect_om_error("truncbin.ply", bin.substr(0, bin.size() - 5), "truncated");
-  std::string oor = good;
-  oor.replace(oor.rfind("3 4 3 2"), 7, "3 4 3 9");
-  expect_om_error("oor.ply", oor, "uses vertex index 9");
-  std::string version = good;
-  version[version.find("1.0")] = '\0';
-  expect_om_error("version.ply", version, "control character in the header");
+  expect_om_error("oor.ply", edited(good, "3 4 3 2", 0, 7, "3 4 3 9"), "uses vertex index 9");
+  expect_om_error("version.ply", edited(good, "1.0", 0, 1, {"\0", 1}), "control character in the header");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -523,12 +525,8 @@ TEST_F(LoaderTest, StlBadInput) {
                            stl_ascii_facet({1, 0, 0}, {1, 1, 0}, {0, 1, 0}) + "endsolid t\n";
   expect_input_error(write("trunc.stl", good.substr(0, good.size() - 40)), "truncated");
   expect_input_error(write("noend.stl", good.substr(0, good.find("endsolid"))), "without 'endsolid'");
-  std::string quad = good;
-  quad.replace(quad.find("endloop"), 0, "vertex 5 5 5\n");
-  expect_input_error(write("quad.stl", quad), "more than 3 vertices");
-  std::string nan = good;
-  nan.replace(nan.find("vertex ") + 7, 8, "nan");
-  expect_input_error(write("nan.stl", nan), "NaN or Inf");
+  expect_input_error(write("quad.stl", edited(good, "endloop", 0, 0, "vertex 5 5 5\n")), "more than 3 vertices");
+  expect_input_error(write("nan.stl", edited(good, "vertex ", 7, 8, "nan")), "NaN or Inf");
   const std::vector<std::array<Vec3, 3>> tris = {{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}}, {{{1, 0, 0}, {1, 1, 0}, {0, 1, 0}}}};
   const std::string bin = stl_binary(tris);
   expect_input_error(write("truncbin.stl", bin.substr(0, bin.size() - 10)), "declares 2 triangles");
@@ -875,20 +873,31 @@ const char* kSharedScenes = TRAVBENCH_SHARED_SCENES;
 const char* kSharedScenes = "";
 #endif
 
-json shared_scenes_json() {
-  std::ifstream in(fs::path(kSharedScenes) / "scenes.json");
-  return json::parse(in);
-}
-
 bool shared_scenes_present() { return kSharedScenes[0] && fs::exists(fs::path(kSharedScenes) / "scenes.json"); }
+
+// A scene of scenes.json: its key, its entry and the path of its file.
+struct SharedScene {
+  std::string key;
+  json entry;
+  std::string path;
+};
+
+// The scenes of scenes.json whose files are present (a checkout may hold only some of them).
+std::vector<SharedScene> present_shared_scenes() {
+  std::ifstream in(fs::path(kSharedScenes) / "scenes.json");
+  const json scenes = json::parse(in);
+  std::vector<SharedScene> present;
+  for (const auto& [key, entry] : scenes.items()) {
+    std::string path = (fs::path(kSharedScenes) / entry["file"].get<std::string>()).string();
+    if (fs::exists(path)) present.push_back({key, entry, std::move(path)});
+  }
+  return present;
+}
 
 TEST(LoaderRealScenes, CountsBoundsAndViewsMatchScenesJson) {
   if (!shared_scenes_present()) GTEST_SKIP() << "shared scenes folder not present";
-  const json scenes = shared_scenes_json();
-  for (const auto& [key, entry] : scenes.items()) {
-    const std::string path = (fs::path(kSharedScenes) / entry["file"].get<std::string>()).string();
+  for (const auto& [key, entry, path] : present_shared_scenes()) {
     SCOPED_TRACE(path);
-    if (!fs::exists(path)) continue;
     const auto t0 = std::chrono::steady_clock::now();
     Scene s = tb::load_scene_file(path);
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -916,13 +925,11 @@ TEST(LoaderRealScenes, CountsBoundsAndViewsMatchScenesJson) {
 // positions, same order (these files have no degenerate faces, which OpenMesh would drop).
 TEST(LoaderRealScenes, ObjParserMatchesOpenMesh) {
   if (!shared_scenes_present()) GTEST_SKIP() << "shared scenes folder not present";
-  const json scenes = shared_scenes_json();
-  for (const auto& [key, entry] : scenes.items()) {
-    const std::string path = (fs::path(kSharedScenes) / entry["file"].get<std::string>()).string();
-    SCOPED_TRACE(path);
-    if (!fs::exists(path) || fs::path(path).extension() != ".obj") continue;
-    Scene ours = tb::load_obj(path);
-    Scene om = tb::load_mesh_openmesh(path);
+  for (const SharedScene& scene : present_shared_scenes()) {
+    if (fs::path(scene.path).extension() != ".obj") continue;
+    SCOPED_TRACE(scene.path);
+    Scene ours = tb::load_obj(scene.path);
+    Scene om = tb::load_mesh_openmesh(scene.path);
     ASSERT_EQ(ours.num_triangles(), om.num_triangles());
     size_t mismatches = 0;
     for (size_t t = 0; t < ours.num_triangles(); ++t) mismatches += corners(ours, t) != corners(om, t);

@@ -6,24 +6,13 @@
 
 #include "cachesim/hierarchy.h"
 #include "traversal/mbvh_traverse.h"
+#include "test_geometry.h"
 #include "test_util.h"
 
 namespace tb {
 namespace {
 
-Scene random_triangles(uint32_t n, uint32_t seed, float spread = 10.f) {
-  Scene s;
-  s.name = "random";
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> U(-spread, spread), E(-0.5f, 0.5f);
-  for (uint32_t i = 0; i < n; ++i) {
-    Vec3 c{U(rng), U(rng), U(rng)};
-    for (int k = 0; k < 3; ++k) s.positions.push_back(c + Vec3{E(rng), E(rng), E(rng)});
-    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
-  }
-  s.ensure_views();
-  return s;
-}
+using test::random_triangles;
 
 // Walks the tree: every triangle exactly once, boxes nested, leaves inside their slot's box,
 // padding lanes copies of the leaf's last triangle, depth within max_depth.
@@ -264,7 +253,7 @@ template <int W>
 void block_matches_scalar() {
   std::mt19937 rng(9);
   std::uniform_real_distribution<float> U(-1.f, 1.f);
-  const Scene s = random_triangles(W * 400, 13, 2.f);
+  const Scene s = random_triangles(W * 400, 13, {.spread = 2.f});
   int hits = 0;
   for (int iter = 0; iter < 400; ++iter) {
     TriBlock<W> blk;

@@ -16,12 +16,7 @@ namespace {
 
 const std::vector<std::string> kPacketSchemes = {"bvh_masked", "bvh_ranged", "bvh_partition"};
 
-Bench& bench_for(const std::string& scene) {
-  static std::map<std::string, std::unique_ptr<Bench>> benches;
-  auto& b = benches[scene];
-  if (!b) b = std::make_unique<Bench>(load_scene(scene));
-  return *b;
-}
+using test::bench_for;
 
 std::vector<Hit> trace_with(Bench& bench, const std::string& scheme, const RayBatch& batch, const SchemeConfig& cfg = {},
                             int threads = 1) {

@@ -20,21 +20,8 @@ namespace {
 
 using test::sat_overlap;
 
-Scene random_soup(uint32_t n, uint32_t seed) {
-  // Small and huge triangles mixed: the huge ones cross many leaves.
-  Scene s;
-  s.name = "soup";
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> U(-10.f, 10.f), E(-0.5f, 0.5f), B(-8.f, 8.f);
-  for (uint32_t i = 0; i < n; ++i) {
-    const Vec3 c{U(rng), U(rng), U(rng)};
-    const bool huge = i % 50 == 0;
-    for (int k = 0; k < 3; ++k) s.positions.push_back(huge ? Vec3{B(rng), B(rng), B(rng)} : c + Vec3{E(rng), E(rng), E(rng)});
-    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
-  }
-  s.ensure_views();
-  return s;
-}
+// Small and huge triangles mixed: the huge ones cross many leaves.
+Scene random_soup(uint32_t n, uint32_t seed) { return test::random_triangles(n, seed, {.huge_every = 50}); }
 
 AABB box_of(const OctreeNode& n) { return {n.lo, n.hi}; }
 
@@ -300,12 +287,7 @@ SchemeConfig config(std::initializer_list<std::pair<const char*, int>> kv) {
   return c;
 }
 
-Bench& bench_for(const std::string& scene) {
-  static std::map<std::string, std::unique_ptr<Bench>> benches;
-  auto& b = benches[scene];
-  if (!b) b = std::make_unique<Bench>(load_scene(scene));
-  return *b;
-}
+using test::bench_for;
 
 // A conventional traversal with raygrid's float watertight kernel (the same float operations,
 // the hit distance from the same double-precision plane equation): the two must agree ray for

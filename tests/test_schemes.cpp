@@ -14,12 +14,7 @@ class SchemeAccuracy : public ::testing::TestWithParam<std::string> {};
 class SchemeRobustness : public ::testing::TestWithParam<std::string> {};
 
 // One bench per scene for the whole suite: workloads and reference hits are generated once.
-Bench& bench_for(const std::string& scene) {
-  static std::map<std::string, std::unique_ptr<Bench>> benches;
-  auto& b = benches[scene];
-  if (!b) b = std::make_unique<Bench>(load_scene(scene));
-  return *b;
-}
+using test::bench_for;
 
 const std::vector<std::string> kScenes = {"room", "stadium", "sphere", "spheres:20000"};
 const std::vector<std::string> kWorkloads = {"primary", "divergence:8", "rnd", "rnd2", "bounce:1", "bounce:2", "shadow"};

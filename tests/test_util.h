@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <map>
+#include <memory>
 #include <string>
 
 #include "harness/accuracy.h"
@@ -12,6 +14,15 @@
 #include "traversal/registry.h"
 
 namespace tb::test {
+
+// The Bench of a scene (a load_scene spec), made on first use and kept for the process: its
+// structures, rays and reference hits are what the traversal tests spend their time on.
+inline Bench& bench_for(const std::string& scene) {
+  static std::map<std::string, std::unique_ptr<Bench>> benches;
+  auto& b = benches[scene];
+  if (!b) b = std::make_unique<Bench>(load_scene(scene));
+  return *b;
+}
 
 inline WorkloadSpec small_spec(const std::string& workload, uint32_t size = 64, uint32_t view = 0) {
   WorkloadSpec s = parse_workload(workload);
