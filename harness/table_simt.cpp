@@ -111,6 +111,7 @@ int simt_table(const TableOptions& opt) {
       r.set("l2_transactions_per_ray", fixed(double(m.l2_hits + m.dram_lines) / rays, 2));
       r.set("dram_transactions_per_ray", fixed(double(m.dram_lines) / rays, 2));
       r.set("l1_hit_rate", fixed(m.warp.load_lines ? double(m.l1_hits) / double(m.warp.load_lines) : 0, 3));
+      r.set("replay_ms", fixed(m.replay_cycles / double(gpu.sms) / (gpu.clock_ghz * 1e9) * 1e3, 4));
       r.set("model_mrays", fixed(m.mrays, 2)).set("model_bound", m.bound);
       r.set("issue_ms", fixed(m.issue_s * 1e3, 4)).set("latency_ms", fixed(m.latency_s * 1e3, 4)).set("dram_ms", fixed(m.dram_s * 1e3, 4));
       r.set("model_pct_of_base", base > 0 ? fixed(100.0 * m.mrays / base, 1) : "");

@@ -53,7 +53,9 @@ ParamSpecs gpu_model_param_specs() {
           int_param("traverse_instructions", int(d.traverse_instructions), 1, 1000,
                     "warp instructions per traversal step (assumed, docs/SIMT.md)"),
           int_param("intersect_instructions", int(d.intersect_instructions), 1, 1000,
-                    "warp instructions per intersection step (assumed, docs/SIMT.md)")};
+                    "warp instructions per intersection step (assumed, docs/SIMT.md)"),
+          real_param("replay_cycles", d.replay_cycles, 0, 100,
+                     "issue cycles per extra 128-byte line a load's lanes touch (uncoalesced replay; assumed 1; 0 = free)")};
 }
 
 GPUModelConfig gpu_model_config(const SchemeConfig& cfg) {
@@ -71,6 +73,7 @@ GPUModelConfig gpu_model_config(const SchemeConfig& cfg) {
   c.clock_ghz = cfg.get_real("clock_ghz");
   c.traverse_instructions = uint32_t(cfg.get_int("traverse_instructions"));
   c.intersect_instructions = uint32_t(cfg.get_int("intersect_instructions"));
+  c.replay_cycles = cfg.get_real("replay_cycles");
   return c;
 }
 
@@ -106,6 +109,7 @@ GPUModelResult run_model(const GPUBVH& bvh, const TriangleSet& tris, const RayBa
       const StepKind k = warps[w]->step();
       const uint32_t sm = uint32_t(w % cfg.sms);
       uint32_t latency = 0;
+      const size_t n_lines = obs[w].lines().size();
       for (const uint64_t line : obs[w].lines()) {
         if (l1[sm].access(line, false, false).hit) ++r.l1_hits, latency = std::max(latency, cfg.l1_latency);
         else if (l2.access(line, false, false).hit) ++r.l2_hits, latency = std::max(latency, cfg.l2_latency);
@@ -118,9 +122,13 @@ GPUModelResult run_model(const GPUBVH& bvh, const TriangleSet& tris, const RayBa
         done[w] = true, --live;
         continue;
       }
-      const double instr = k == StepKind::traverse ? cfg.traverse_instructions : cfg.intersect_instructions;
-      issue[sm] += instr / cfg.issue_per_cycle;
-      serial[w] += instr * per_instr + latency;
+      const bool trav = k == StepKind::traverse;
+      const double instr = trav ? cfg.traverse_instructions : cfg.intersect_instructions;
+      const double replays = double(trav ? cfg.traverse_loads : cfg.intersect_loads) *
+                             double(n_lines > 1 ? n_lines - 1 : 0) * cfg.replay_cycles;
+      r.replay_cycles += replays;
+      issue[sm] += instr / cfg.issue_per_cycle + replays;
+      serial[w] += instr * per_instr + replays + latency;
     }
   }
   for (const auto& o : obs) r.warp.add(o.counters);

@@ -4,7 +4,8 @@
 // from one pool. Every step's distinct 128-byte lines go through the cache simulator (cachesim/:
 // one L1 per SM, one shared L2), and the run's time is the largest of three bounds:
 //   issue:   per SM, the warp instructions of its steps / issue rate (warp steps x instructions
-//            per step: a step costs the same however many lanes are active: SIMT),
+//            per step: a step costs the same however many lanes are active: SIMT), plus the
+//            replays of loads whose lanes touch several lines (uncoalesced loads),
 //   latency: per SM, its slowest warp's serial time: per step, its instructions x the dependent
 //            issue interval, plus the latency of the slowest level that served one of its lines
 //            (a warp waits for all of its lanes' loads),
@@ -58,6 +59,15 @@ struct GPUModelConfig {
   // matters more than the level.
   uint32_t traverse_instructions = 40;
   uint32_t intersect_instructions = 30;
+  // Coalescing cost: a load instruction whose active lanes touch L distinct 128-byte lines is
+  // replayed until every line is served, one line per L1 access (CUDA C Programming Guide 3.2,
+  // §G.4.2: "one memory transaction per cache line"; NVIDIA's profilers count these replays as
+  // issued instructions). A&L fetch a 64-byte node as four float4 loads and a Woop triangle as
+  // three; so a step costs loads x (L - 1) x replay_cycles extra issue cycles (1 cycle per line,
+  // assumed). This is how the model makes divergent rays cost more than their steps.
+  uint32_t traverse_loads = 4;
+  uint32_t intersect_loads = 3;
+  double replay_cycles = 1.0;
   // Warps resident per SM (assumed: A&L's kernels use ~32-40 registers per thread; 32768
   // registers per SM give ~24 warps of 32 threads; Fermi's maximum is 48).
   uint32_t warps_per_sm = 24;
@@ -81,6 +91,7 @@ struct GPUModelResult {
   WarpCounters warp;
   uint64_t l1_hits = 0, l2_hits = 0, dram_lines = 0;  // load lines by the level that served them
   uint64_t store_lines = 0;                           // hit stores (to L2; Fermi's L1 does not cache stores)
+  double replay_cycles = 0;                           // issue cycles of load replays (all SMs)
   double issue_s = 0, latency_s = 0, dram_s = 0;      // the three bounds (seconds)
   double seconds = 0, mrays = 0;
   std::string bound;  // "issue", "latency" or "dram"
