@@ -116,19 +116,36 @@ class LineObserver {
   }
   std::span<const uint64_t> lines() const { return loads_; }
   std::span<const uint64_t> store_lines() const { return stores_; }
+  // Maps the host array [base, base + bytes) to its own 128-byte-aligned region of a virtual GPU
+  // address space, so lines (coalescing, cache sets) do not depend on where the host allocator put
+  // it and runs are reproducible. Addresses outside every region are used as they are.
+  void add_region(const void* base, size_t bytes) {
+    const uint64_t vbase = (uint64_t(regions_.size()) + 1) << 40;
+    regions_.push_back({reinterpret_cast<uintptr_t>(base), bytes, vbase});
+  }
 
  private:
+  struct Region {
+    uint64_t base, bytes, vbase;
+  };
+  uint64_t address(const void* p) const {
+    const uint64_t a = reinterpret_cast<uintptr_t>(p);
+    for (const Region& r : regions_)
+      if (a - r.base < r.bytes) return r.vbase + (a - r.base);
+    return a;
+  }
   void load(const void* p, uint32_t bytes) {
     counters.load_requests++;
     add_lines(loads_, p, bytes);
   }
   // Line addresses (byte address / 128) of [p, p + bytes), each once per step.
-  static void add_lines(std::vector<uint64_t>& v, const void* p, uint32_t bytes) {
-    const uint64_t a = reinterpret_cast<uintptr_t>(p);
+  void add_lines(std::vector<uint64_t>& v, const void* p, uint32_t bytes) const {
+    const uint64_t a = address(p);
     for (uint64_t l = a / kGpuLineBytes; l <= (a + bytes - 1) / kGpuLineBytes; ++l)
       if (std::find(v.begin(), v.end(), l) == v.end()) v.push_back(l);
   }
   std::vector<uint64_t> loads_, stores_;
+  std::vector<Region> regions_;
 };
 
 // One warp. step() issues exactly one step (at least one active lane) and returns its kind, or

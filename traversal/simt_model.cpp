@@ -93,6 +93,13 @@ GPUModelResult run_model(const GPUBVH& bvh, const TriangleSet& tris, const RayBa
   RayPool pool{0, uint32_t(batch.size())};
   const size_t nwarps = size_t(cfg.sms) * cfg.warps_per_sm;
   std::vector<LineObserver> obs(nwarps);
+  for (LineObserver& o : obs) {  // the arrays a warp reads and writes, at fixed virtual addresses
+    o.add_region(bvh.nodes.data(), bvh.bytes());
+    o.add_region(tris.verts.data(), tris.verts.size() * sizeof(TriVerts));
+    o.add_region(tris.planes.data(), tris.planes.size() * sizeof(PlaneTri));
+    o.add_region(batch.rays.data(), batch.rays.size() * sizeof(Ray));
+    o.add_region(hits.data(), hits.size_bytes());
+  }
   std::vector<std::unique_ptr<Warp<K, LineObserver>>> warps;
   for (size_t w = 0; w < nwarps; ++w)
     warps.push_back(std::make_unique<Warp<K, LineObserver>>(bvh, tris, batch, hits, pool, opt, obs[w]));
