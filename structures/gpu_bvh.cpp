@@ -26,7 +26,7 @@ GPUBVH GPUBVH::from_bvh(const BVH& bvh) {
     return g;
   }
   g.nodes.reserve(bvh.stats.nodes / 2 + 1);
-  // Depth first, left first: (binary BVH interior node, GPU slot to fill, depth).
+  // Work list, left subtree first: (binary BVH interior node, GPU slot to fill, depth).
   struct Item { uint32_t src, dst, depth; };
   std::vector<Item> todo{{0, 0, 1}};
   g.nodes.emplace_back();
@@ -47,7 +47,7 @@ GPUBVH GPUBVH::from_bvh(const BVH& bvh) {
       }
     }
     g.nodes[it.dst] = n;
-    // Right pushed first so the left subtree is laid out next (depth first, left first).
+    // Right pushed first so the left subtree is converted next.
     for (int c = 1; c >= 0; --c)
       if (!n.child[c].is_leaf()) todo.push_back({first + uint32_t(c), n.child[c].index, it.depth + 1});
   }

@@ -5,8 +5,9 @@
 // order the two children. Leaves are not nodes: a child reference with a non-zero count names a
 // range of leaf-ordered triangles (the same TriangleSet slots as the binary BVH's leaves).
 //
-// Made only by conversion from the one binary builder's tree (structures/bvh.h); the node order is
-// depth first, left child first, as A&L's kernels lay out their trees.
+// Made only by conversion from the one binary builder's tree (structures/bvh.h). Node order: the
+// root first; a node's interior children get their slots (adjacent) when it is converted, and the
+// left subtree is converted before the right, so a parent always precedes its children.
 #pragma once
 #include <cstdint>
 #include <string>
