@@ -35,14 +35,14 @@ struct GPUModelConfig {
   double dram_gbs = 133.9;
   // The cache simulator takes power-of-two sizes (cachesim/cache_level.h), so the GTX470's 640 KB
   // L2 is modelled as 512 KB, and Fermi's 16 or 48 KB L1 (64 KB split with shared memory;
-  // cudaFuncCachePreferL1 selects 48 KB, as A&L's Fermi kernels do) as 32 KB, between the two.
+  // cudaFuncCachePreferL1 selects 48 KB) as 32 KB, between the two.
   uint64_t l2_bytes = 512 * 1024;
   uint32_t l2_assoc = 16;     // assumed (not published)
   uint64_t l1_bytes = 32 * 1024;
   uint32_t l1_assoc = 4;      // assumed (not published)
   // Latencies in shader cycles. DRAM: "400 to 600 clock cycles" (CUDA C Programming Guide 3.2,
-  // §5.3.2); L1 and L2 hit latencies are assumed (microbenchmarks of Fermi report L2 hits at
-  // roughly half the DRAM latency and L1 hits an order of magnitude below DRAM).
+  // §5.3.2); L1 and L2 hit latencies are assumed (L2 at half the DRAM latency, L1 an order of
+  // magnitude below DRAM; not measured here, and not published by NVIDIA for the GTX470).
   uint32_t l1_latency = 40;
   uint32_t l2_latency = 250;
   uint32_t dram_latency = 500;
