@@ -283,7 +283,51 @@ def plot_build(path):
            "ms (log)", thesis=bool(th))
 
 
+def plot_simt(path):
+    """Tables 12-13 on the SIMT warp model (docs/SIMT.md): efficiency, % of D=1, Table 13 growth."""
+    rows = read(path)
+    loops = list(dict.fromkeys(r["loop"] for r in rows))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    styles = {"while_while": "tab:blue", "if_if": "tab:orange"}
+    t12 = list(dict.fromkeys(r["row"] for r in rows if r["table"] == "12"))
+    t13 = list(dict.fromkeys(r["row"] for r in rows if r["table"] == "13"))
+    for loop in loops:
+        lr = {(r["table"], r["row"]): r for r in rows if r["loop"] == loop}
+        c = styles.get(loop, "tab:green")
+        axes[0].plot(range(len(t12)), [num(lr[("12", k)], "simt_efficiency") for k in t12], "-o", ms=3, color=c,
+                     label=loop)
+        axes[1].plot(range(len(t12)), [num(lr[("12", k)], "model_pct_of_base") for k in t12], "-o", ms=3, color=c,
+                     label=f"model, {loop}")
+        axes[2].plot(range(len(t13)), [num(lr[("13", k)], "model_mrays") for k in t13], "-o", ms=3, color=c,
+                     label=f"model, {loop}")
+    first = {(r["table"], r["row"]): r for r in rows if r["loop"] == loops[0]}
+    th12 = [(i, num(first[("12", k)], "thesis_pct_of_base")) for i, k in enumerate(t12)]
+    th13 = [(i, num(first[("13", k)], "thesis_mrays")) for i, k in enumerate(t13)]
+    for ax, th in ((axes[1], th12), (axes[2], th13)):
+        th = [p for p in th if not math.isnan(p[1])]
+        if th:
+            ax.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black", zorder=3,
+                       label="thesis (GTX470)")
+    for ax, labels, title, ylabel in ((axes[0], t12, "SIMT efficiency (Table 12 rows)", "active lanes / 32"),
+                                      (axes[1], t12, "Table 12: % of D=1", "% of D=1"),
+                                      (axes[2], t13, "Table 13: O active lanes per warp (rnd2)", "Mrays/s (log)")):
+        ax.set_xticks(range(len(labels)))
+        ax.set_xticklabels(labels, rotation=30, fontsize=8)
+        ax.set_title(title)
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[2].set_yscale("log")
+    scene = rows[0]["scene"] if rows else ""
+    fig.suptitle(f"{scene}: SIMT warp model of GPU traversal (thesis §6.2; a model, not a GPU measurement)")
+    fig.tight_layout()
+    fig.savefig(path.with_suffix(".png"), dpi=110)
+    plt.close(fig)
+    print(f"wrote {path.with_suffix('.png')}")
+
+
 PLOTTERS = {
+    "simt": plot_simt,
     "run": plot_run,
     "accuracy": plot_accuracy,
     "divergence": plot_divergence,

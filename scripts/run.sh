@@ -5,14 +5,15 @@
 # FOLDER: every scene file in it (e.g. ../shared/scenes).
 # The default suite takes 4-8 minutes per scene on 2 cores (measured: room 4; Sponza and Conference
 # 11 together); --quick ~1 minute (small images, 1 rep). --steps picks a subset of
-# run,divergence,bounce,raygrid,cache,accuracy,build (default: all). --scaling adds the scaling
+# run,divergence,bounce,raygrid,cache,accuracy,build,simt (default: all; simt is the SIMT warp
+# model of thesis Tables 12-13, docs/SIMT.md, ~2 minutes per real scene). --scaling adds the scaling
 # table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory) under results/spheres/.
 # Ends with the performance-goal ratios of each scene (scripts/goals.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=0
 scaling=0
-want=run,divergence,bounce,raygrid,cache,accuracy,build
+want=run,divergence,bounce,raygrid,cache,accuracy,build,simt
 scenes=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -61,6 +62,7 @@ for scene in "${scenes[@]}"; do
   has cache && steps+=("$TB table cache --scene $scene --reps 1 --csv $out/cache.csv")
   has accuracy && steps+=("$TB table accuracy --scene $scene ${small[*]} --csv $out/accuracy.csv")
   has build && steps+=("$TB table build --scene $scene --reps 3 --csv $out/build.csv")
+  has simt && steps+=("$TB table simt --scene $scene ${big[*]} --csv $out/simt.csv")
 done
 if [ $scaling -eq 1 ]; then
   steps+=("$TB table scaling ${small[*]} --csv results/spheres/scaling.csv")

@@ -9,6 +9,7 @@
 namespace tb {
 
 std::string WorkloadSpec::name() const {
+  if (kind == "divergence" && tile != 16) return kind + ":" + std::to_string(param) + "/" + std::to_string(tile);
   if (kind == "divergence" || kind == "bounce") return kind + ":" + std::to_string(param);
   return kind;
 }
@@ -23,7 +24,14 @@ WorkloadSpec parse_workload(const std::string& text) {
   WorkloadSpec s;
   const auto colon = text.find(':');
   s.kind = text.substr(0, colon);
-  const std::string arg = colon == std::string::npos ? "" : text.substr(colon + 1);
+  std::string arg = colon == std::string::npos ? "" : text.substr(colon + 1);
+  if (s.kind == "divergence" && arg.find('/') != std::string::npos) {  // divergence:D/T
+    const std::string t = arg.substr(arg.find('/') + 1);
+    arg = arg.substr(0, arg.find('/'));
+    if (t != "1" && t != "2" && t != "4" && t != "8" && t != "16")
+      throw InputError("workload '" + text + "': the tile of divergence:D/T must be 1, 2, 4, 8 or 16 (it divides the 16x16 packet)");
+    s.tile = uint32_t(std::stoul(t));
+  }
   auto int_arg = [&](int lo, int hi) {
     char* end = nullptr;
     const long v = std::strtol(arg.c_str(), &end, 10);
@@ -206,10 +214,11 @@ RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float diverg
   b.rays.reserve(size_t(spec.width) * spec.height);
   for (uint32_t ty = 0; ty < spec.height; ty += 16)
     for (uint32_t tx = 0; tx < spec.width; tx += 16) {
-      const float cx = tx + 8.f, cy = ty + 8.f;
       for (uint32_t i = 0; i < 256; ++i) {
         uint32_t x, y;
         fig16_pixel(i, x, y);
+        const float half = 0.5f * float(spec.tile);
+        const float cx = float(tx + x / spec.tile * spec.tile) + half, cy = float(ty + y / spec.tile * spec.tile) + half;
         x += tx, y += ty;
         if (x >= spec.width || y >= spec.height) continue;
         Ray r;

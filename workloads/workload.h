@@ -19,10 +19,13 @@ using ClosestHitFn = std::function<void(const RayBatch&, std::span<Hit>)>;
 struct WorkloadSpec {
   std::string kind;   // primary, divergence, rnd, rnd2, bounce, shadow, hard:*
   int param = 1;      // D for divergence, k for bounce
+  // divergence only: the side of the square tiles around whose centres D scales the ray angles
+  // ("divergence:D/T"; 16 = the 16x16 packets of thesis §3.4, 8 = the 8x8 tiles of Table 12, §6.2.1).
+  uint32_t tile = 16;
   uint32_t width = 512, height = 512;
   uint32_t view = 0;  // index into scene.views
   uint64_t seed = 1;
-  std::string name() const;  // canonical name, e.g. "divergence:8"
+  std::string name() const;  // canonical name, e.g. "divergence:8", "divergence:8/8"
 };
 
 // Parses "primary", "divergence:D", "rnd", "rnd2", "bounce:k", "shadow" (and the hard cases);
@@ -37,7 +40,8 @@ RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const C
 
 // Primary rays in 16x16 packets, Fig. 16 layout (thesis §3.3): each packet is four 8x8 quadrants
 // of 64 rays, each quadrant sixteen 2x2 groups. D scales the angle between adjacent rays of a
-// tile around the tile centre (§3.4), so D > 1 tiles overlap and touch the same geometry.
+// tile (spec.tile x spec.tile pixels, aligned within the packet) around the tile centre (§3.4),
+// so D > 1 tiles overlap and touch the same geometry.
 RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float divergence);
 
 // Pixel of the i-th ray (0..255) of a 16x16 packet in the Fig. 16 layout.
