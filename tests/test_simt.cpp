@@ -26,7 +26,7 @@ WarpCounters counters_of(const RayBatch& b, const SimtOptions& opt, std::vector<
 
 TEST(SimtLayout, ConversionKeepsEveryInteriorNodeAndLeaf) {
   const GPUBVHData d = room_gpu();
-  const BVH& bvh = *d.bvh.bvh;
+  const BVH& bvh = *d.bvh.tree;
   EXPECT_EQ(d.gpu->nodes.size(), size_t(bvh.stats.nodes - bvh.stats.leaves));
   uint64_t leaf_tris = 0;
   for (const GPUNode& n : d.gpu->nodes)

@@ -13,25 +13,16 @@ namespace {
 // Binary leaves of up to 4 triangles, and subtrees of up to 4 merged into one block.
 constexpr MBVHDefaults kDefaults{4, 4, false, 4};
 
-class MBVH4Single final : public TraverserBase<MBVH4Single> {
+class MBVH4Single final : public MBVHScheme<MBVH4Single, MBVHData<4, 4>> {
  public:
-  explicit MBVH4Single(const SchemeConfig& cfg) : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)) {}
+  explicit MBVH4Single(const SchemeConfig& cfg) : MBVHScheme(cfg, kDefaults) {}
   std::string_view name() const override { return "mbvh4_single"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    data_ = fetch_mbvh<4, 4>(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.mbvh->stats.describe(); }
-  size_t structure_bytes() const override { return mbvh_bytes(data_, cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    dispatch_kernel(cfg_.kernel, [&](auto k) { mbvh_trace_rays<4, 4, decltype(k)::value>(data_, batch, range, hits, probe); });
+    const MBVHData<4, 4>& d = std::get<0>(data_.data);
+    dispatch_kernel(cfg_.kernel, [&](auto k) { mbvh_trace_rays<4, 4, decltype(k)::value>(d, batch, range, hits, probe); });
   }
-
- private:
-  SchemeConfig cfg_;
-  MBVHBuildParams params_;
-  MBVHData<4, 4> data_;
 };
 
 }  // namespace

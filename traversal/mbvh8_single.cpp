@@ -25,17 +25,11 @@ namespace {
 // more triangle bytes.
 constexpr MBVHDefaults kDefaults{4, 16, true, 0};
 
-class MBVH8Single final : public TraverserBase<MBVH8Single> {
+class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHData<8, 8>> {
  public:
-  explicit MBVH8Single(const SchemeConfig& cfg)
-      : cfg_(cfg), tri_width_(cfg.get_int("tri_width")), params_(mbvh_params(cfg, kDefaults)) {}
+  // tri_width=4: layout 0, 8: layout 1.
+  explicit MBVH8Single(const SchemeConfig& cfg) : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1) {}
   std::string_view name() const override { return "mbvh8_single"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    if (tri_width_ == 4) data_.data = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
-    else data_.data = fetch_mbvh<8, 8>(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -48,12 +42,6 @@ class MBVH8Single final : public TraverserBase<MBVH8Single> {
       });
     });
   }
-
- private:
-  SchemeConfig cfg_;
-  int tri_width_;
-  MBVHBuildParams params_;
-  MBVHChoice<MBVHData<8, 4>, MBVHData<8, 8>> data_;
 };
 
 }  // namespace

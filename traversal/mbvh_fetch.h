@@ -3,6 +3,7 @@
 // structures/ never parses a SchemeConfig (issue 15: layers point down).
 #pragma once
 #include <string>
+#include <utility>
 #include <variant>
 
 #include "structures/mbvh.h"
@@ -29,12 +30,11 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d);
 template <int N, int W>
 MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel);
 
-// The MBVH of a scheme that offers two layouts by a parameter (mbvh8_single's tri_width,
-// mbvh_rs's width): it holds the one it runs, and `visit` hands that to a generic lambda (once per
-// trace call, outside the per-ray loop).
-template <class A, class B>
+// The MBVH of a scheme, in the one of its layouts it runs (mbvh8_single's tri_width, mbvh_rs's
+// width); `visit` hands it to a generic lambda (once per trace call, outside the per-ray loop).
+template <class... Layouts>
 struct MBVHChoice {
-  std::variant<A, B> data;
+  std::variant<Layouts...> data;
   template <class F>
   decltype(auto) visit(F&& f) const {
     return std::visit(std::forward<F>(f), data);
@@ -44,6 +44,37 @@ struct MBVHChoice {
   }
   size_t bytes(TriKernel k) const {
     return visit([&](const auto& d) { return mbvh_bytes(d, k); });
+  }
+};
+
+// The base of the MBVH schemes (mbvh4_single, mbvh8_single, mbvh_rs): the config, the MBVH build
+// parameters read with the scheme's defaults, and the cached MBVH in layout number `layout` of
+// Layouts (MBVHData<N, W> types), with its description and size. Derived provides name() and
+// run(), which runs data_ through data_.visit.
+template <class Derived, class... Layouts>
+class MBVHScheme : public TraverserBase<Derived> {
+ public:
+  MBVHScheme(const SchemeConfig& cfg, const MBVHDefaults& defaults, size_t layout = 0)
+      : cfg_(cfg), params_(mbvh_params(cfg, defaults)), layout_(layout) {}
+  void prepare(const Scene& scene, StructureCache& cache) override {
+    [&]<size_t... I>(std::index_sequence<I...>) {
+      (fetch_layout<I>(scene, cache), ...);
+    }(std::index_sequence_for<Layouts...>{});
+  }
+  std::string structure_info() const override { return data_.describe(); }
+  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
+
+ protected:
+  SchemeConfig cfg_;
+  MBVHBuildParams params_;
+  size_t layout_;
+  MBVHChoice<Layouts...> data_;
+
+ private:
+  template <size_t I>
+  void fetch_layout(const Scene& scene, StructureCache& cache) {
+    using D = std::variant_alternative_t<I, std::variant<Layouts...>>;
+    if (layout_ == I) data_.data.template emplace<I>(fetch_mbvh<D::kN, D::kW>(scene, cache, params_, cfg_.kernel));
   }
 };
 

@@ -39,20 +39,14 @@ constexpr int kDefaultWidth = 8;
 // to mbvh8_single, merge 4 / 8 / 16: conference 1.12 / 1.23 / 1.26, sponza 1.16 / 1.25 / 1.11.
 constexpr MBVHDefaults kDefaults4{4, 4, false, 4}, kDefaults8{4, 8, true, 4};
 
-class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
+class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBVHData<8, 4>> {
  public:
+  // width=4: layout 0 with the thesis' defaults; width=8: layout 1.
   explicit MBVHRayStream(const SchemeConfig& cfg)
-      : cfg_(cfg),
-        width_(cfg.get_int("width")),
-        stream_(cfg.get_int("stream")),
-        params_(mbvh_params(cfg, width_ == 4 ? kDefaults4 : kDefaults8)) {}
+      : MBVHScheme(cfg, cfg.get_int("width") == 4 ? kDefaults4 : kDefaults8, cfg.get_int("width") == 4 ? 0 : 1),
+        stream_(cfg.get_int("stream")) {}
   std::string_view name() const override { return "mbvh_rs"; }
-  void prepare(const Scene& scene, StructureCache& cache) override {
-    if (width_ == 4) data_.data = fetch_mbvh<4, 4>(scene, cache, params_, cfg_.kernel);
-    else data_.data = fetch_mbvh<8, 4>(scene, cache, params_, cfg_.kernel);
-  }
-  std::string structure_info() const override { return data_.describe() + " stream=" + std::to_string(stream_); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
+  std::string structure_info() const override { return MBVHScheme::structure_info() + " stream=" + std::to_string(stream_); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -133,11 +127,7 @@ class MBVHRayStream final : public TraverserBase<MBVHRayStream> {
     }
   }
 
-  SchemeConfig cfg_;
-  int width_;
   int stream_;
-  MBVHBuildParams params_;
-  MBVHChoice<MBVHData<4, 4>, MBVHData<8, 4>> data_;
 };
 
 }  // namespace

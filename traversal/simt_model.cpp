@@ -11,7 +11,7 @@ namespace tb {
 GPUBVHData fetch_gpu_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel) {
   GPUBVHData d;
   d.bvh = fetch_bvh(scene, cache, params, kernel);
-  d.gpu = cache.get<GPUBVH>(params.key() + ":gpu", [&] { return GPUBVH::from_bvh(*d.bvh.bvh); });
+  d.gpu = cache.get<GPUBVH>(params.key() + ":gpu", [&] { return GPUBVH::from_bvh(*d.bvh.tree); });
   return d;
 }
 
