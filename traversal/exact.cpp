@@ -24,6 +24,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <vector>
 
 #include "structures/structure_cache.h"
@@ -448,13 +449,6 @@ std::vector<uint32_t> prims_overlapping(const BVH& bvh, const Scene& scene, cons
   return out;
 }
 
-bool share_vertex(const Scene& s, uint32_t p, uint32_t q) {
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      if (s.vertex(p, i) == s.vertex(q, j)) return true;  // identical float coordinates (+0 == -0)
-  return false;
-}
-
 // Whether some triangle of `landed` is not tied to the surface `group`: tied means connected to a
 // triangle of the group by a chain of triangles that share a vertex (identical float
 // coordinates) and all overlap the box of the crossing points `pts` (padded by a few float ulps of
@@ -479,8 +473,19 @@ bool lands_untied(const BVH& bvh, const Scene& scene, const std::vector<uint32_t
   nodes.insert(nodes.end(), landed.begin(), landed.end());
   std::sort(nodes.begin(), nodes.end());
   nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
-  // Flood fill from the group over shared vertices (the sets are small: the triangles at one
-  // crossing point).
+  // Flood fill from the group over shared vertices, by identical float coordinates (+0 and -0
+  // are one key): linear in the triangles of the box, which a grazing ray can make large.
+  auto key = [](Vec3 v) {
+    uint32_t b[3];
+    for (int a = 0; a < 3; ++a) {
+      const float x = v[a] + 0.f;  // -0 + 0 = +0
+      std::memcpy(&b[a], &x, 4);
+    }
+    return std::array<uint32_t, 3>{b[0], b[1], b[2]};
+  };
+  std::map<std::array<uint32_t, 3>, std::vector<size_t>> at_vertex;
+  for (size_t i = 0; i < nodes.size(); ++i)
+    for (int v = 0; v < 3; ++v) at_vertex[key(scene.vertex(nodes[i], v))].push_back(i);
   std::vector<char> tied(nodes.size(), 0);
   std::vector<size_t> todo;
   for (size_t i = 0; i < nodes.size(); ++i)
@@ -488,8 +493,9 @@ bool lands_untied(const BVH& bvh, const Scene& scene, const std::vector<uint32_t
   while (!todo.empty()) {
     const size_t i = todo.back();
     todo.pop_back();
-    for (size_t j = 0; j < nodes.size(); ++j)
-      if (!tied[j] && share_vertex(scene, nodes[i], nodes[j])) tied[j] = 1, todo.push_back(j);
+    for (int v = 0; v < 3; ++v)
+      for (size_t j : at_vertex[key(scene.vertex(nodes[i], v))])
+        if (!tied[j]) tied[j] = 1, todo.push_back(j);
   }
   for (uint32_t p : landed)
     if (!tied[size_t(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin())]) return true;
