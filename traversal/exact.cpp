@@ -451,13 +451,14 @@ std::vector<uint32_t> prims_overlapping(const BVH& bvh, const Scene& scene, cons
 
 // Whether some triangle of `landed` is not tied to the surface `group`: tied means connected to a
 // triangle of the group by a chain of triangles that share a vertex (identical float
-// coordinates) and all overlap the box of the crossing points `pts` (padded by a few float ulps of
-// their magnitude, so the chain may be longer, never shorter: the test errs towards "tied").
+// coordinates) and all overlap the box of the crossing points `pts`, padded by 2^-20 of their
+// magnitude (8 float ulps; a larger box can only lengthen chains: the test errs towards "tied").
 // A watertight float kernel evaluates an edge or vertex shared by two triangles identically for
-// both (Woop, Benthin, Wald 2013, §3-4), so it cannot pass between tied triangles; between
-// triangles that share no vertex (a T-junction: a vertex inside another triangle's edge; meshes
-// meeting without common vertices) each decision is rounded on its own and a ray within ulps of
-// the seam can be rejected by both (docs/ACCURACY.md "Error kinds", the non-conforming seam rule).
+// both (Woop, Benthin, Wald, "Watertight Ray/Triangle Intersection", JCGT 2(1), 2013, claim
+// closure for edges shared with identical vertices), so it cannot pass between tied triangles;
+// between triangles that share no vertex (a T-junction: a vertex inside another triangle's edge;
+// meshes meeting without common vertices) each decision is rounded on its own and a ray within
+// ulps of the seam can be rejected by both (docs/ACCURACY.md "Error kinds", the seam rule).
 bool lands_untied(const BVH& bvh, const Scene& scene, const std::vector<uint32_t>& group,
                   const std::vector<uint32_t>& landed, const std::vector<P3>& pts) {
   if (landed.empty()) return false;
