@@ -95,24 +95,51 @@ ERROR_KINDS = [("false_miss", "tab:red"), ("false_hit", "tab:orange"), ("wrong_t
                ("ambiguous", "tab:gray")]
 
 
-def error_kind_panel(ax, rows, title):
-    """Stacked bars per kernel: each error kind (docs/ACCURACY.md) as a fraction of all rays."""
-    kernels = list(dict.fromkeys(r["kernel"] for r in rows))
-    bottom = [0.0] * len(kernels)
-    for kind, c in ERROR_KINDS:
-        vals = []
-        for k in kernels:
-            kr = [r for r in rows if r["kernel"] == k]
-            rays = sum(num(r, "rays") for r in kr)
-            n = sum(0.0 if math.isnan(num(r, kind)) else num(r, kind) for r in kr)
-            vals.append(n / rays if rays else 0.0)
-        ax.bar(range(len(kernels)), vals, 0.7, bottom=bottom, color=c, label=kind)
-        bottom = [b + v for b, v in zip(bottom, vals)]
-    ax.set_xticks(range(len(kernels)))
-    ax.set_xticklabels(kernels, rotation=20, fontsize=8)
+def error_kind_panel(ax, rows, title, key="kernel"):
+    """Side-by-side bars per `key` (kernel, or scheme): the count of each error kind
+    (docs/ACCURACY.md) summed over the rows, on a symlog axis (linear up to 1, log above), since a
+    handful of leaks sits next to thousands of ambiguous rays; every nonzero count is written on
+    its bar, so a single leak is as legible as a thousand."""
+    groups = list(dict.fromkeys(r[key] for r in rows))
+    width = 0.8 / len(ERROR_KINDS)
+    top = 1.0
+    for j, (kind, c) in enumerate(ERROR_KINDS):
+        vals = [sum(0.0 if math.isnan(num(r, kind)) else num(r, kind) for r in rows if r[key] == g) for g in groups]
+        xs = [i + (j - (len(ERROR_KINDS) - 1) / 2) * width for i in range(len(groups))]
+        ax.bar(xs, vals, width, color=c, label=kind)
+        for x, v in zip(xs, vals):
+            if v > 0:
+                ax.text(x, v, f"{v:.0f}", ha="center", va="bottom", fontsize=5, rotation=90)
+        top = max([top] + vals)
+    ax.set_yscale("symlog", linthresh=1)
+    ax.set_ylim(0, top * 30)
+    ax.set_xticks(range(len(groups)))
+    ax.set_xticklabels(groups, rotation=30 if key == "kernel" else 60, fontsize=7)
     ax.set_title(title, fontsize=9)
-    ax.set_ylabel("fraction of rays (all schemes, workloads)", fontsize=8)
+    ax.set_ylabel("rays (symlog; all rows summed)", fontsize=8)
     ax.grid(alpha=0.3, axis="y")
+
+
+def plot_hard(path):
+    """hard_cases.csv: one panel per hard:* workload, the error kinds of each scheme's default kernel."""
+    rows = [r for r in read(path) if r["scheme"] != "reference"]
+    workloads = list(dict.fromkeys(r["workload"] for r in rows))
+    cols = 2
+    nrows = (len(workloads) + cols - 1) // cols
+    fig, axes = plt.subplots(nrows, cols, figsize=(14, 3.4 * nrows), squeeze=False)
+    for ax, w in zip(axes.flat, workloads):
+        wr = [r for r in rows if r["workload"] == w]
+        error_kind_panel(ax, wr, f"{w} ({wr[0]['rays']} rays)", key="scheme")
+    for ax in list(axes.flat)[len(workloads):]:
+        ax.axis("off")
+    if workloads:
+        axes[0][0].legend(fontsize=7)
+    fig.suptitle(f"{rows[0]['scene'] if rows else ''}: error kinds of every scheme (default kernel) on the hard cases, "
+                 "vs the exact reference (embree_*: baselines)")
+    fig.tight_layout()
+    fig.savefig(path.with_suffix(".png"), dpi=100)
+    plt.close(fig)
+    print(f"wrote {path.with_suffix('.png')}")
 
 
 def plot_accuracy(path):
@@ -330,6 +357,7 @@ PLOTTERS = {
     "simt": plot_simt,
     "run": plot_run,
     "accuracy": plot_accuracy,
+    "hard": plot_hard,
     "divergence": plot_divergence,
     "bounce": lambda p: plot_by_workload_with_thesis(p, "bounce depth (thesis §5.2.3, Table 7)"),
     "raygrid": lambda p: plot_by_workload_with_thesis(p, "RayGrid vs MBVH (thesis §5.3, Table 9)"),

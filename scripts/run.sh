@@ -5,15 +5,16 @@
 # FOLDER: every scene file in it (e.g. ../shared/scenes).
 # The default suite takes 4-8 minutes per scene on 2 cores (measured: room 4; Sponza and Conference
 # 11 together); --quick ~1 minute (small images, 1 rep). --steps picks a subset of
-# run,divergence,bounce,raygrid,cache,accuracy,build,simt (default: all; simt is the SIMT warp
-# model of thesis Tables 12-13, docs/SIMT.md, ~2 minutes per real scene). --scaling adds the scaling
+# run,divergence,bounce,raygrid,cache,accuracy,hard,build,simt (default: all; hard: every scheme's
+# default kernel on the hard:* workloads, hard_cases.csv; simt is the SIMT warp model of thesis
+# Tables 12-13, docs/SIMT.md, ~2 minutes per real scene). --scaling adds the scaling
 # table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory) under results/spheres/.
 # Ends with the performance-goal ratios of each scene (scripts/goals.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=0
 scaling=0
-want=run,divergence,bounce,raygrid,cache,accuracy,build,simt
+want=run,divergence,bounce,raygrid,cache,accuracy,hard,build,simt
 scenes=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -43,10 +44,12 @@ scripts/build.sh >"$buildlog" 2>&1 || { tail -30 "$buildlog" >&2; rm -f "$buildl
 rm -f "$buildlog"
 TB=build/travbench
 if [ $quick -eq 1 ]; then
-  big=(--width 128 --height 128 --reps 1); small=(--width 64 --height 64 --reps 1)
+  big=(--width 128 --height 128 --reps 1); small=(--width 64 --height 64 --reps 1); hard=("${small[@]}")
 else
   big=(--width 512 --height 512 --reps 5); small=(--width 256 --height 256 --reps 3)
+  hard=(--width 256 --height 256 --reps 1)  # an accuracy check: one timed repetition is enough
 fi
+hard_workloads=$($TB list workloads | grep '^hard:' | paste -sd, -)
 tables=$($TB list tables)
 has() { grep -qx "$1" <<<"$tables" && grep -qw "$1" <<<"${want//,/ }"; }
 
@@ -61,6 +64,7 @@ for scene in "${scenes[@]}"; do
   has raygrid && steps+=("$TB table raygrid --scene $scene ${big[*]} --csv $out/raygrid.csv")
   has cache && steps+=("$TB table cache --scene $scene --reps 1 --csv $out/cache.csv")
   has accuracy && steps+=("$TB table accuracy --scene $scene ${small[*]} --csv $out/accuracy.csv")
+  grep -qw hard <<<"${want//,/ }" && steps+=("$TB run --scene $scene --schemes all --workloads $hard_workloads ${hard[*]} --csv $out/hard_cases.csv")
   has build && steps+=("$TB table build --scene $scene --reps 3 --csv $out/build.csv")
   has simt && steps+=("$TB table simt --scene $scene ${big[*]} --csv $out/simt.csv")
 done

@@ -329,17 +329,57 @@ TEST(ExactOracle, AmbiguityClassifiesPlantedErrors) {
       << "a hit behind the origin";
 }
 
+// Sponza / hard:edges, rays 61314 and 62009 (256x256), rebuilt from the scene's floats: a ledge
+// (X, in y = 4.82331) whose edge runs along the corner line z = 7.22149, the wall above it
+// starting with Y, whose bottom edge is a piece of that line between other vertices (a
+// T-junction: Y shares no vertex with X), and a back wall B. The exact ray crosses X 4.4e-8 (in
+// barycentrics) inside that edge and misses Y by 1.9e-8: a watertight kernel rounds X's edge and
+// Y's edge separately and, on this ray, rejects both and reports B. That is ambiguous (a moved ray
+// lands on Y, which is not tied to X by a shared vertex); with a wall triangle that shares X's
+// edge instead, the same answer is a leak through a shared edge.
+TEST(ExactOracle, TJunctionSeamIsAmbiguousSharedEdgeIsNot) {
+  const Vec3 x0{0.00724f, 4.82331f, 3.18149f}, x1{0.00724f, 4.82331f, 7.22149f}, x2{16.218f, 4.82331f, 7.22149f};
+  const Vec3 b0{0.00724f, -0.906686f, 7.80149f}, b1{17.4172f, -0.906686f, 7.80149f}, b2{17.4172f, 15.6533f, 7.80149f};
+  const Ray r = ray({0x1.d7ep-8f, 0x1.d7e43ep+2f, 0x1.869p-10f}, {0x1.c06c5ep-1f, -0x1.492ad2p-3f, 0x1.d1ff92p-2f});
+  const std::vector<Vec3> y_tjunction = {{16.168f, 4.82331f, 7.22149f}, {11.6372f, 4.82331f, 7.22149f},
+                                         {16.168f, 8.12331f, 7.22149f}};
+  const std::vector<Vec3> y_shared = {x2, x1, {16.218f, 8.12331f, 7.22149f}};
+  for (const bool tjunction : {true, false}) {
+    const auto& y = tjunction ? y_tjunction : y_shared;
+    const Checked c(mesh({x0, x1, x2, y[0], y[1], y[2], b0, b1, b2}, {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}}));
+    const Hit h = c.trace(r);
+    ASSERT_EQ(h.prim, 0u) << "the exact ray hits the ledge";
+    EXPECT_EQ(h.t, 15.8654642f);
+    const Hit back = c.oracle.closest(ray(r.org, r.dir, 16.f));
+    ASSERT_EQ(back.prim, 2u);
+    EXPECT_EQ(c.oracle.ambiguous(r, back, kDistanceBar), tjunction) << (tjunction ? "T-junction" : "shared edge");
+    EXPECT_FALSE(c.oracle.ambiguous(r, Hit{}, kDistanceBar)) << "a miss escapes nothing: the corner is closed";
+    // Every non-baseline scheme's default kernel on this ray: no non-ambiguous error on either mesh.
+    RayBatch one;
+    one.rays = {r};
+    one.group_uniform(1);
+    for (const auto& name : test::schemes_under_test(true)) {
+      auto t = make_scheme(name);
+      Bench bench(c.scene);
+      t->prepare(bench.scene(), bench.cache());
+      std::vector<Hit> hits(1);
+      trace_batch(*t, one, hits, 1);
+      const Accuracy a = compare_hits(hits, std::vector<Hit>{h}, [&](size_t) {
+        return c.oracle.ambiguous(r, hits[0], kDistanceBar);
+      });
+      EXPECT_EQ(a.non_ambiguous(), 0u) << name << (tjunction ? " T-junction" : " shared edge") << ": prim "
+                                       << hits[0].prim << " t " << hits[0].t;
+      if (a.ambiguous) std::printf("  %s on the T-junction: prim %u t %g, ambiguous\n", name.c_str(), hits[0].prim, hits[0].t);
+    }
+  }
+}
+
 // ---- hard-case workloads of the built-in scenes ------------------------------------------------
 
 const std::vector<std::string> kHardScenes = {"room", "stadium", "sphere", "sphere@148376,1234,-223423",
                                               "sphere@1483760,12340,-2234230", "room@-250000,100000,730000"};
 
-Bench& bench_for(const std::string& scene) {
-  static std::map<std::string, std::unique_ptr<Bench>> benches;
-  auto& b = benches[scene];
-  if (!b) b = std::make_unique<Bench>(load_scene(scene));
-  return *b;
-}
+using test::bench_for;
 
 TEST(ExactReference, EqualsBruteForceOnHardCaseSamples) {
   for (const auto& scene : kHardScenes) {

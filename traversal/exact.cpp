@@ -20,9 +20,11 @@
 #include <gmpxx.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <vector>
 
 #include "structures/structure_cache.h"
@@ -412,6 +414,95 @@ bool inside_within_roundings(const Ray& ray, Vec3 A, Vec3 B, Vec3 C, int k) {
   return t >= ray.tmin - slack && t < double(ray.tmax) + slack;
 }
 
+using P3 = std::array<double, 3>;
+
+// Triangles whose bounding boxes overlap the box [lo, hi] (inclusive), over the BVH.
+std::vector<uint32_t> prims_overlapping(const BVH& bvh, const Scene& scene, const double lo[3], const double hi[3]) {
+  std::vector<uint32_t> out, stack;
+  if (bvh.nodes.empty()) return out;
+  auto overlaps = [&](const double* blo, const double* bhi) {
+    for (int a = 0; a < 3; ++a)
+      if (bhi[a] < lo[a] || blo[a] > hi[a]) return false;
+    return true;
+  };
+  stack.push_back(0);
+  while (!stack.empty()) {
+    const BVHNode& n = bvh.nodes[stack.back()];
+    stack.pop_back();
+    const double nlo[3] = {n.lo.x, n.lo.y, n.lo.z}, nhi[3] = {n.hi.x, n.hi.y, n.hi.z};
+    if (!overlaps(nlo, nhi)) continue;
+    if (!n.is_leaf()) {
+      stack.push_back(n.left_first), stack.push_back(n.left_first + 1);
+      continue;
+    }
+    for (uint32_t k = n.left_first; k < n.left_first + n.count; ++k) {
+      const uint32_t prim = bvh.prim_index[k];
+      double tlo[3], thi[3];
+      for (int a = 0; a < 3; ++a) {
+        tlo[a] = thi[a] = scene.vertex(prim, 0)[a];
+        for (int v = 1; v < 3; ++v) tlo[a] = std::min(tlo[a], double(scene.vertex(prim, v)[a])),
+                                    thi[a] = std::max(thi[a], double(scene.vertex(prim, v)[a]));
+      }
+      if (overlaps(tlo, thi)) out.push_back(prim);
+    }
+  }
+  return out;
+}
+
+// Whether some triangle of `landed` is not tied to the surface `group`: tied means connected to a
+// triangle of the group by a chain of triangles that share a vertex (identical float
+// coordinates) and all overlap the box of the crossing points `pts`, padded by 2^-20 of their
+// magnitude (8 float ulps; a larger box can only lengthen chains: the test errs towards "tied").
+// A watertight float kernel evaluates an edge or vertex shared by two triangles identically for
+// both (Woop, Benthin, Wald, "Watertight Ray/Triangle Intersection", JCGT 2(1), 2013, claim
+// closure for edges shared with identical vertices), so it cannot pass between tied triangles;
+// between triangles that share no vertex (a T-junction: a vertex inside another triangle's edge;
+// meshes meeting without common vertices) each decision is rounded on its own and a ray within
+// ulps of the seam can be rejected by both (docs/ACCURACY.md "Error kinds", the seam rule).
+bool lands_untied(const BVH& bvh, const Scene& scene, const std::vector<uint32_t>& group,
+                  const std::vector<uint32_t>& landed, const std::vector<P3>& pts) {
+  if (landed.empty()) return false;
+  double lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = INFINITY, hi[a] = -INFINITY;
+    for (const P3& p : pts) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    const double pad = 0x1p-20 * std::max({1.0, std::fabs(lo[a]), std::fabs(hi[a])});
+    lo[a] -= pad, hi[a] += pad;
+  }
+  std::vector<uint32_t> nodes = prims_overlapping(bvh, scene, lo, hi);
+  nodes.insert(nodes.end(), group.begin(), group.end());
+  nodes.insert(nodes.end(), landed.begin(), landed.end());
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+  // Flood fill from the group over shared vertices, by identical float coordinates (+0 and -0
+  // are one key): linear in the triangles of the box, which a grazing ray can make large.
+  auto key = [](Vec3 v) {
+    uint32_t b[3];
+    for (int a = 0; a < 3; ++a) {
+      const float x = v[a] + 0.f;  // -0 + 0 = +0
+      std::memcpy(&b[a], &x, 4);
+    }
+    return std::array<uint32_t, 3>{b[0], b[1], b[2]};
+  };
+  std::map<std::array<uint32_t, 3>, std::vector<size_t>> at_vertex;
+  for (size_t i = 0; i < nodes.size(); ++i)
+    for (int v = 0; v < 3; ++v) at_vertex[key(scene.vertex(nodes[i], v))].push_back(i);
+  std::vector<char> tied(nodes.size(), 0);
+  std::vector<size_t> todo;
+  for (size_t i = 0; i < nodes.size(); ++i)
+    if (std::find(group.begin(), group.end(), nodes[i]) != group.end()) tied[i] = 1, todo.push_back(i);
+  while (!todo.empty()) {
+    const size_t i = todo.back();
+    todo.pop_back();
+    for (int v = 0; v < 3; ++v)
+      for (size_t j : at_vertex[key(scene.vertex(nodes[i], v))])
+        if (!tied[j]) tied[j] = 1, todo.push_back(j);
+  }
+  for (uint32_t p : landed)
+    if (!tied[size_t(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin())]) return true;
+  return false;
+}
+
 }  // namespace
 
 bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, int k) const {
@@ -445,7 +536,13 @@ bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, in
   // miss) must be escaped by some moved ray. A surface is the group of hits within the bar of each
   // other (both triangles at a shared edge or vertex). Escaping means no hit from the window's
   // start on, or a first hit beyond the window on a primitive outside the group: the neighbour
-  // across an edge at the same distance does not count (a leak through a shared edge is a leak).
+  // across an edge at the same distance does not count (a leak through a shared edge is a leak)
+  // unless it is not tied to the group by shared vertices (lands_untied: a T-junction, where a
+  // float kernel's decisions on the two triangles are independent roundings).
+  const auto point = [](const Ray& r, float t) {
+    return P3{double(r.org.x) + double(t) * r.dir.x, double(r.org.y) + double(t) * r.dir.y,
+                 double(r.org.z) + double(t) * r.dir.z};
+  };
   Ray before = ray;
   if (scheme.hit()) before.tmax = std::min(ray.tmax, scheme.t - bar(scheme.t));
   const std::vector<Hit> hs = all_hits(before);
@@ -459,6 +556,9 @@ bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, in
       return false;
     };
     bool escapes = false;
+    std::vector<uint32_t> group, landed;  // landed: other triangles moved rays hit in the window
+    std::vector<P3> pts;               // the crossing points of the exact and the moved rays
+    for (size_t g = i; g < j; ++g) group.push_back(hs[g].prim), pts.push_back(point(ray, hs[g].t));
     for (const Ray& m : moves) {
       Ray w = m;
       w.tmin = std::max(ray.tmin, lo);
@@ -467,8 +567,10 @@ bool ExactOracle::ambiguous(const Ray& ray, const Hit& scheme, float rel_bar, in
         escapes = true;
         break;
       }
+      pts.push_back(point(m, x.t));
+      if (!in_group(x.prim)) landed.push_back(x.prim);
     }
-    if (!escapes) return false;
+    if (!escapes && !lands_untied(*bvh_, *scene_, group, landed, pts)) return false;
     i = j;
   }
   return true;
