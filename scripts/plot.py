@@ -40,6 +40,24 @@ def num(row, key):
         return math.nan
 
 
+def points(rows, col):
+    """(index, value) of the rows whose column `col` holds a number (thesis values, refit times)."""
+    return [(i, num(r, col)) for i, r in enumerate(rows) if not math.isnan(num(r, col))]
+
+
+def scatter(ax, pts, **style):
+    """Marks the (index, value) points on ax; nothing when there are none."""
+    if pts:
+        ax.scatter([p[0] for p in pts], [p[1] for p in pts], **style)
+
+
+def finish_rows(fig, ax, path, labels, rotation, fontsize, title, ylabel, thesis=False):
+    """finish() for a plot of one bar per CSV row, labelled under the bars."""
+    ax.set_xticks(range(len(labels)))
+    ax.set_xticklabels(labels, rotation=rotation, fontsize=fontsize)
+    finish(fig, ax, path.with_suffix(".png"), title, ylabel, thesis=thesis)
+
+
 def ordered(names):
     return sorted(set(names), key=lambda s: (SCHEME_ORDER.index(s) if s in SCHEME_ORDER else 99, s))
 
@@ -255,16 +273,13 @@ def plot_cache(path):
         vals = [0 if math.isnan(v) else v for v in vals]
         ax.bar(range(len(rows)), vals, bottom=bottom, color=shade, label=name)
         bottom = [b + v for b, v in zip(bottom, vals)]
-    th = [(i, num(r, "thesis_read_cost_mcycles")) for i, r in enumerate(rows)]
-    th = [p for p in th if not math.isnan(p[1])]
+    th = points(rows, "thesis_read_cost_mcycles")
     if th:
         ax2 = ax.twinx()
-        ax2.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
+        scatter(ax2, th, facecolors="none", edgecolors="black")
         ax2.set_ylabel("thesis estimate (1e6 cycles, Conference 512x512)")
-    ax.set_xticks(range(len(rows)))
-    ax.set_xticklabels(labels, rotation=30, fontsize=8)
-    finish(fig, ax, path.with_suffix(".png"), "estimated read cost per level (thesis §5.4, Table 11)",
-           "1e6 cycles (read hits x latency)", thesis=bool(th))
+    finish_rows(fig, ax, path, labels, 30, 8, "estimated read cost per level (thesis §5.4, Table 11)",
+                "1e6 cycles (read hits x latency)", thesis=bool(th))
 
 
 def plot_scaling(path):
@@ -291,23 +306,14 @@ def plot_build(path):
     labels = [f'{r["structure"]} {r.get("triangles", "")} tris, {r.get("threads", "1")} thr' for r in rows]
     fig, ax = plt.subplots(figsize=(max(7, len(rows) * 0.5), 5.2))
     ax.bar(range(len(rows)), [num(r, "build_ms") for r in rows], color="#4292c6", label="build (travbench / Embree)")
-    refit = [(i, num(r, "refit_ms")) for i, r in enumerate(rows) if not math.isnan(num(r, "refit_ms"))]
-    if refit:
-        ax.scatter([p[0] for p in refit], [p[1] for p in refit], marker="_", s=200, color="#d94801", zorder=3,
-                   label="refit")
-    th = [(i, num(r, "thesis_ms")) for i, r in enumerate(rows)]
-    th = [p for p in th if not math.isnan(p[1])]
-    if th:
-        ax.scatter([p[0] for p in th], [p[1] for p in th], facecolors="none", edgecolors="black")
-    tr = [(i, num(r, "thesis_refit_ms")) for i, r in enumerate(rows) if not math.isnan(num(r, "thesis_refit_ms"))]
-    if tr:
-        ax.scatter([p[0] for p in tr], [p[1] for p in tr], marker="D", facecolors="none", edgecolors="#d94801",
-                   label="thesis refit")
+    scatter(ax, points(rows, "refit_ms"), marker="_", s=200, color="#d94801", zorder=3, label="refit")
+    th = points(rows, "thesis_ms")
+    scatter(ax, th, facecolors="none", edgecolors="black")
+    scatter(ax, points(rows, "thesis_refit_ms"), marker="D", facecolors="none", edgecolors="#d94801",
+            label="thesis refit")
     ax.set_yscale("log")
-    ax.set_xticks(range(len(rows)))
-    ax.set_xticklabels(labels, rotation=60, fontsize=7)
-    finish(fig, ax, path.with_suffix(".png"), "build and refit times, 1 thread unless marked (thesis Table 1)",
-           "ms (log)", thesis=bool(th))
+    finish_rows(fig, ax, path, labels, 60, 7, "build and refit times, 1 thread unless marked (thesis Table 1)",
+                "ms (log)", thesis=bool(th))
 
 
 def plot_simt(path):
