@@ -14,7 +14,6 @@ namespace tb {
 ParamSpecs kd_param_specs();
 KDBuildParams kd_params(const SchemeConfig& cfg);
 
-using KDData = TreeData<KDTree>;
 // The base of kd_single and kd_packet.
 template <class Derived>
 using KDScheme = TreeScheme<Derived, KDTree, KDBuildParams, kd_params>;

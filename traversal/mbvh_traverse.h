@@ -409,27 +409,17 @@ inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const Node
   }
 }
 
-// The per-ray loop of the single-ray MBVH schemes: sets up each ray of `range` and hands it to
-// `traverse(nr, tr, rc, hit, stack)`.
-template <int N, int W, class P, class F>
-void mbvh_for_each_ray(const MBVH<N, W>& m, const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe,
-                       F&& traverse) {
-  std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
-  for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
-    const RayCtx rc(ray);
-    traverse(NodeRay<N>(rc, ray.tmin), TriRay<W>(rc, ray.tmin), rc, hit, stack.data());
-  });
-}
-
 // Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
 template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
 void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                      P& probe) {
   const MBVH<N, W>& m = *d.mbvh;
-  mbvh_for_each_ray(m, batch, range, hits, probe,
-                    [&](const NodeRay<N>& nr, const TriRay<W>& tr, const RayCtx& rc, Hit& hit, MBVHStackEntry* stack) {
-                      mbvh_traverse<N, W, K, O>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack, probe);
-                    });
+  std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
+  for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
+    const RayCtx rc(ray);
+    mbvh_traverse<N, W, K, O>(m, d.tris.get(), NodeRay<N>(rc, ray.tmin), TriRay<W>(rc, ray.tmin), &rc, 0, hit,
+                              stack.data(), probe);
+  });
 }
 
 }  // namespace tb
