@@ -278,8 +278,10 @@ void block_matches_scalar() {
       if (r % 7 == 0) ray.dir.y = 0.f;  // axis-parallel components take the same path
       const RayCtx rc(ray);
       Hit a = initial_hit(ray), b = initial_hit(ray);
-      for (uint32_t l = 0; l < uint32_t(W); ++l) intersect_tri<TriKernel::watertight>(rc, ts, l, ray.tmin, a);
-      block_intersect<W>(TriRay<W>(rc, ray.tmin), blk, b);
+      // A block's real lanes: all, or (as the last block of a leaf) fewer; the others must never hit.
+      const uint32_t lanes = iter % 2 ? uint32_t(W) : uint32_t(W) - uint32_t(iter / 2) % uint32_t(W);
+      for (uint32_t l = 0; l < lanes; ++l) intersect_tri<TriKernel::watertight>(rc, ts, l, ray.tmin, a);
+      block_intersect<W>(TriRay<W>(rc, ray.tmin), blk, b, lane_bits(lanes));
       ASSERT_EQ(a.prim, b.prim) << "iter " << iter << " ray " << r;
       if (a.hit()) {
         ++hits;
@@ -289,7 +291,7 @@ void block_matches_scalar() {
       }
     }
   }
-  EXPECT_GT(hits, 500);
+  EXPECT_GT(hits, 300);
 }
 TEST(MBVH, BlockTestMatchesScalarWatertight4) { block_matches_scalar<4>(); }
 TEST(MBVH, BlockTestMatchesScalarWatertight8) { block_matches_scalar<8>(); }

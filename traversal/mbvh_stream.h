@@ -110,7 +110,8 @@ inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32
   return _mm256_loadu2_m128(b.v[corner][row_b], b.v[corner][row_a]);
 }
 
-inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) {
+// `lanes`: the block's real triangles (low 4 bits): padding lanes never reach the double distance.
+inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2], uint32_t lanes) {
   using S = simd::V<8>;
   using f = __m256;
   using D = simd::D4v;
@@ -124,7 +125,7 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2]) 
   const f Cx = shear<8>(S::sub(pair_rows(b, 2, r.kx[0], r.kx[1]), r.ox), r.sx, Cz);
   const f Cy = shear<8>(S::sub(pair_rows(b, 2, r.ky[0], r.ky[1]), r.oy), r.sy, Cz);
   f U, Vv, Ww, det;
-  int m = S::mask(watertight_inside<8>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
+  int m = S::mask(watertight_inside<8>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det)) & int(lanes | lanes << 4);
   if (!m) return;
   // Candidates: exact_plane_distance's double plane equation, four lanes (the block's four
   // triangles) of a ray at once — a ray's line passes through several triangles of a leaf, most
@@ -320,14 +321,16 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       probe_leaf(m, t.ref, probe, t.count);
       uint32_t i = 0;
       if constexpr (K == TriKernel::watertight) {
-        const uint32_t first = mbvh_ref::first_block(t.ref), nblocks = (mbvh_ref::num_tris(t.ref) + 3) / 4;
+        const uint32_t first = mbvh_ref::first_block(t.ref), ntris = mbvh_ref::num_tris(t.ref);
+        const uint32_t nblocks = (ntris + 3) / 4;
         for (; i + 1 < t.count; i += 2) {
           probe.read(&list[i], 2 * sizeof(uint16_t));
           probe_ray(v, list[i], probe);
           probe_ray(v, list[i + 1], probe);
           const PairRay pr = pair_ray(v, list[i], list[i + 1]);
           Hit* h[2] = {&v.hits[list[i]], &v.hits[list[i + 1]]};
-          for (uint32_t k = 0; k < nblocks; ++k) pair_intersect(pr, blocks[first + k], h);
+          for (uint32_t k = 0; k < nblocks; ++k)
+            pair_intersect(pr, blocks[first + k], h, lane_bits(std::min<uint32_t>(4, ntris - 4 * k)));
         }
       }
       for (; i < t.count; ++i) {

@@ -138,12 +138,17 @@ struct TriRay {
   }
 };
 
+// The low n bits set: a block's real lanes.
+constexpr uint32_t lane_bits(uint32_t n) { return (1u << n) - 1; }
+
 // The watertight test of the kernel library on W triangles at once (one ray, W lanes): the same
 // float operations in the same order per lane as intersect_watertight, so its watertightness
 // carries over. On a hit with tmin <= t < hit.t records the closest (the first lane on ties, as a
-// scalar loop would) and returns true.
+// scalar loop would) and returns true. `lanes` are the block's real triangles: the last block of
+// a leaf pads with copies of its last triangle, and a ray whose line crosses that triangle (one
+// leaving it, say) would otherwise pay the double distance once per copy (issue 17).
 template <int W>
-[[gnu::noinline]] inline bool block_intersect(const TriRay<W>& r, const TriBlock<W>& b, Hit& hit) {
+[[gnu::noinline]] inline bool block_intersect(const TriRay<W>& r, const TriBlock<W>& b, Hit& hit, uint32_t lanes) {
   using S = simd::V<W>;
   using f = typename S::f;
   const f Az = S::sub(S::load(b.v[0][r.kz]), r.oz);
@@ -156,7 +161,7 @@ template <int W>
   const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), r.ox), r.sx, Cz);
   const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), r.oy), r.sy, Cz);
   f U, Vv, Ww, det;
-  int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
+  int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det)) & int(lanes);
   if (!m) return false;
   // The candidates (usually none or one per block): exact_plane_distance's plane equation in
   // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
@@ -198,7 +203,7 @@ inline void leaf_test(const TriBlock<W>* blocks, const TriangleSet* ts, const Tr
   const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
   for (uint32_t k = 0; k * W < ntris; ++k) {
     if constexpr (K == TriKernel::watertight) {
-      block_intersect<W>(tr, blocks[first + k], hit);
+      block_intersect<W>(tr, blocks[first + k], hit, lane_bits(std::min<uint32_t>(W, ntris - k * W)));
     } else {
       const uint32_t lanes = std::min<uint32_t>(W, ntris - k * W);
       for (uint32_t l = 0; l < lanes; ++l) intersect_tri<K>(*rc, *ts, (first + k) * W + l, tr.tmin, hit);
@@ -225,7 +230,7 @@ inline void leaf_test(const MBVH<N, W>& m, const TriangleSet* ts, const TriRay<W
   if constexpr (W == 8) {
     if (ntris <= m.small_leaf) {
       if constexpr (K == TriKernel::watertight) {
-        block_intersect<4>(tr.half, m.small[first], hit);
+        block_intersect<4>(tr.half, m.small[first], hit, lane_bits(ntris));
       } else {
         for (uint32_t l = 0; l < ntris; ++l) intersect_tri<K>(*rc, *ts, m.small_lane(first, l), tr.tmin, hit);
       }
