@@ -157,7 +157,7 @@ class SpatialBuilder {
       const AABB cb = centroid_bounds(refs);
       const float scale = obins_ / (cb.hi[a] - cb.lo[a]);
       for (auto& r : refs)
-        (obin(r, cb.lo[a], scale, a) < best.pos ? left : right).push_back(r);
+        (obin(r.box.centre()[a], cb.lo[a], scale) < best.pos ? left : right).push_back(r);
       if (!left.empty() && !right.empty()) return true;
       left.clear();
       right.clear();
@@ -173,23 +173,24 @@ class SpatialBuilder {
     for (const auto& r : refs) cb.grow(r.box.centre());
     return cb;
   }
-  int obin(const SpatialRef& r, float lo, float scale, int a) const {
-    return std::clamp(int((r.box.centre()[a] - lo) * scale), 0, obins_ - 1);
-  }
+  int obin(float centre, float lo, float scale) const { return std::clamp(int((centre - lo) * scale), 0, obins_ - 1); }
 
-  // Binned SAH over reference centroids (Wald 2007), as structures/bvh.cpp.
+  // Binned SAH over reference centroids (Wald 2007), as structures/bvh.cpp. The centroids are
+  // computed once per node (they were recomputed per axis: a fifth of the build).
   Split object_split(const std::vector<SpatialRef>& refs) {
     Split best;
-    const AABB cb = centroid_bounds(refs);
+    cen_.resize(refs.size());
+    AABB cb;
+    for (size_t i = 0; i < refs.size(); ++i) cb.grow(cen_[i] = refs[i].box.centre());
     std::vector<Bin>& bins = bins_;
     for (int a = 0; a < 3; ++a) {
       const float ext = cb.hi[a] - cb.lo[a];
       if (!(ext > 0.f)) continue;
       const float scale = obins_ / ext;
       bins.assign(obins_, Bin{});
-      for (const auto& r : refs) {
-        Bin& b = bins[obin(r, cb.lo[a], scale, a)];
-        b.box.grow(r.box);
+      for (size_t i = 0; i < refs.size(); ++i) {
+        Bin& b = bins[obin(cen_[i][a], cb.lo[a], scale)];
+        b.box.grow(refs[i].box);
         b.count++;
       }
       sweep(bins, a, Split::object, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.count; });
@@ -238,14 +239,24 @@ class SpatialBuilder {
     if (k >= sbins_) return box.hi[axis];
     return box.lo[axis] + (box.hi[axis] - box.lo[axis]) * (float(k) / float(sbins_));
   }
-  int sbin(const AABB& box, int axis, float x) const {
-    const float ext = box.hi[axis] - box.lo[axis];
-    int k = std::clamp(int((x - box.lo[axis]) / ext * float(sbins_)), 0, sbins_ - 1);
-    // Agree with plane(): x belongs to bin k when plane(k) <= x < plane(k + 1).
-    while (k > 0 && x < plane(box, axis, k)) --k;
-    while (k < sbins_ - 1 && x >= plane(box, axis, k + 1)) ++k;
-    return k;
-  }
+  // The planes of one axis computed once (plane(box, axis, k) for k = 0..sbins), and the bin of a
+  // coordinate: a multiply for the guess, then the planes decide (x belongs to bin k when
+  // plane(k) <= x < plane(k + 1)), so binning and splitting agree whatever the guess's rounding.
+  struct AxisBins {
+    float pl[257];
+    float lo, scale;
+    int n;
+    AxisBins(const SpatialBuilder& b, const AABB& box, int axis) : lo(box.lo[axis]), n(b.sbins_) {
+      for (int k = 0; k <= n; ++k) pl[k] = b.plane(box, axis, k);
+      scale = float(n) / (box.hi[axis] - box.lo[axis]);
+    }
+    int bin(float x) const {
+      int k = std::clamp(int((x - lo) * scale), 0, n - 1);
+      while (k > 0 && x < pl[k]) --k;
+      while (k < n - 1 && x >= pl[k + 1]) ++k;
+      return k;
+    }
+  };
   // Bounds of the parts of r's triangle below and above x[axis] = pos, within r's box.
   void split_ref(const SpatialRef& r, int axis, float pos, AABB& left, AABB& right) const {
     const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
@@ -265,8 +276,9 @@ class SpatialBuilder {
     for (int a = 0; a < 3; ++a) {
       if (!(box.hi[a] - box.lo[a] > 0.f)) continue;
       bins.assign(sbins_, Bin{});
+      const AxisBins ab(*this, box, a);
       for (const auto& r : refs) {
-        const int b0 = sbin(box, a, r.box.lo[a]), b1 = sbin(box, a, r.box.hi[a]);
+        const int b0 = ab.bin(r.box.lo[a]), b1 = ab.bin(r.box.hi[a]);
         bins[b0].count++;
         bins[b1].exits++;
         if (b0 == b1) {
@@ -279,8 +291,8 @@ class SpatialBuilder {
           // cost; the split itself, if chosen, clips exactly (do_spatial).
           for (int b = b0; b <= b1; ++b) {
             AABB part = r.box;
-            part.lo[a] = std::max(part.lo[a], plane(box, a, b));
-            part.hi[a] = std::min(part.hi[a], plane(box, a, b + 1));
+            part.lo[a] = std::max(part.lo[a], ab.pl[b]);
+            part.hi[a] = std::min(part.hi[a], ab.pl[b + 1]);
             bins[b].box.grow(part);
           }
           continue;
@@ -291,7 +303,7 @@ class SpatialBuilder {
         AABB rest = r.box;
         for (int b = b0; b < b1; ++b) {
           AABB l, rr;
-          split_ref(v, rest, a, plane(box, a, b + 1), l, rr);
+          split_ref(v, rest, a, ab.pl[b + 1], l, rr);
           if (!l.empty()) bins[b].box.grow(l);
           rest = rr;
           if (rr.empty()) break;
@@ -311,8 +323,9 @@ class SpatialBuilder {
     const float x = plane(box, a, s.pos);
     AABB lb, rb;
     std::vector<const SpatialRef*> straddle;
+    const AxisBins ab(*this, box, a);
     for (const auto& r : refs) {
-      const int b0 = sbin(box, a, r.box.lo[a]), b1 = sbin(box, a, r.box.hi[a]);
+      const int b0 = ab.bin(r.box.lo[a]), b1 = ab.bin(r.box.hi[a]);
       if (b1 < s.pos) {
         left.push_back(r);
         lb.grow(r.box);
@@ -371,6 +384,7 @@ class SpatialBuilder {
   size_t used_ = 0;
   float root_area_ = 1.f;
   std::vector<Bin> bins_;
+  std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;
 };
