@@ -18,6 +18,7 @@
 #include "cachesim/din_trace.h"
 #include "harness/compare.h"
 #include "harness/experiment.h"
+#include "harness/sweep.h"
 #include "harness/tables.h"
 #include "harness/trace_runner.h"
 #include "structures/builtin_scenes.h"
@@ -185,6 +186,9 @@ int main(int argc, char** argv) {
   run->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
   run->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru")->check(kPolicy);
   run->get_option("--csv")->required();
+  bool resume = false;
+  run->add_flag("--resume", resume,
+                "keep the cells --csv holds from an interrupted run of the same sweep and measure only the rest");
 
   std::string table_name;
   auto* table = app.add_subcommand("table", "Reproduce a thesis table -> CSV + terminal table");
@@ -209,6 +213,7 @@ int main(int argc, char** argv) {
   trace->add_option("--scheme", scheme_arg, "scheme name")->required()->check(kScheme);
   trace->add_option("--rays", rays_in, "ray file to read")->required();
   trace->add_option("--hits", hits_out, "hit file to write")->check(kOutputFile);
+
 
   std::string cache_config = "l1=32K:8,l2=256K:8,l3=2M:16", policy = "plru", trace_path;
   auto* cachesim = app.add_subcommand("cachesim", "Replay a Dinero IV din trace through the cache simulator");
@@ -284,10 +289,7 @@ int main(int argc, char** argv) {
       for (std::string w; std::getline(ss, w, ',');)
         if (!w.empty()) ro.workloads.push_back(parse_workload(w).name());
       if (ro.workloads.empty()) throw InputError("--workloads is empty");
-      const auto records = run_experiment(bench, ro);
-      write_csv(csv_path, records,
-                {{"command", "run"}, {"scene", scene_arg}, {"scene_hash", bench.scene().content_hash()},
-                 {"seed", ro.seed}, {"width", ro.width}, {"height", ro.height}});
+      run_sweep(bench, ro, scene_arg, csv_path, resume);
       std::fprintf(stderr, "wrote %s\n", csv_path.c_str());
       return 0;
     }

@@ -21,7 +21,7 @@ while [ $# -gt 0 ]; do
     --quick) quick=1 ;;
     --scaling) scaling=1 ;;
     --steps) want=${2:?--steps needs a list}; shift ;;
-    -h|--help) sed -n 2,10p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,13p "$0"; exit 0 ;;
     -*) echo "run.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
     *)
       if [ -d "$1" ]; then
@@ -73,20 +73,27 @@ if [ $scaling -eq 1 ]; then
 fi
 
 # One line of progress per step on stderr; each step's own output goes to its log beside the CSV.
+# A step writes into a fresh staging folder and its outputs (the files named like its last
+# argument: X.csv, X.json, X.log, X.png) move into results/ only when it finished, so an
+# interrupted re-run never leaves committed results half overwritten.
 total=${#steps[@]}
 i=0
 start=$(date +%s)
+stage=$(mktemp -d results/.staging.XXXXXX)
+trap 'rm -rf "$stage"' EXIT
 for step in "${steps[@]}"; do
   i=$((i + 1))
-  csv=${step##* }
+  dest=${step##* }
+  tmp=$stage/$i/$(basename "$dest")
   bar=$(printf '%*s' $((i * 30 / total)) '' | tr ' ' '#')
-  printf '[%-30s] %d/%d %s (%ds)\n' "$bar" "$i" "$total" "${csv}" $(( $(date +%s) - start )) >&2
-  mkdir -p "$(dirname "$csv")"
-  if ! $step >"${csv%.csv}.log" 2>&1; then
+  printf '[%-30s] %d/%d %s (%ds)\n' "$bar" "$i" "$total" "${dest}" $(( $(date +%s) - start )) >&2
+  mkdir -p "$(dirname "$tmp")" "$(dirname "$dest")"
+  if ! ${step% *} "$tmp" >"${tmp%.*}.log" 2>&1; then
     echo "step failed: $step" >&2
-    tail -3 "${csv%.csv}.log" >&2
+    tail -3 "${tmp%.*}.log" >&2
     exit 1
   fi
+  mv -f "$(dirname "$tmp")"/* "$(dirname "$dest")"/
 done
 folders=()
 for scene in "${scenes[@]}"; do name=$(basename "$scene"); folders+=("results/${name%.*}"); done

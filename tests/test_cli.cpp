@@ -1,6 +1,12 @@
 // The command line contract (DESIGN.md): list output, run -> CSV columns, bad input -> one-line
 // error and a non-zero exit, never a crash.
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <set>
+#include <thread>
 
 #include <cstdio>
 #include <fstream>
@@ -158,6 +164,84 @@ TEST(CLI, CompareTwoRuns) {
   EXPECT_NE(other.out.find("only in new"), std::string::npos) << other.out;
   const Result bad = travbench("compare " + a + " " + dir + "/missing.csv");
   EXPECT_NE(bad.code, 0);
+}
+
+std::vector<std::string> lines_of(const std::string& path) {
+  std::ifstream f(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(f, line);) lines.push_back(line);
+  return lines;
+}
+
+// The (workload, scheme) cells of a run CSV, each once: a duplicate fails the test.
+std::set<std::string> cells_of(const std::string& path) {
+  const std::vector<std::string> lines = lines_of(path);
+  std::set<std::string> cells;
+  if (lines.empty()) return cells;
+  std::vector<std::string> head;
+  std::stringstream hs(lines[0]);
+  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::stringstream rs(lines[i]);
+    std::string workload, scheme;
+    size_t c = 0;
+    for (std::string v; std::getline(rs, v, ','); ++c) {
+      if (c < head.size() && head[c] == "workload") workload = v;
+      if (c < head.size() && head[c] == "scheme") scheme = v;
+    }
+    EXPECT_TRUE(cells.insert(workload + "/" + scheme).second) << "duplicate row " << lines[i];
+  }
+  return cells;
+}
+
+// Issue 20, "sweeps that lose nothing": a run killed with SIGKILL after its first cells keeps
+// every finished cell (whole rows, header once), and --resume completes it with no duplicate
+// row and the cells an uninterrupted run has. Enough repetitions that the sweep is still running
+// when the first row appears; the kill then lands between or inside later cells.
+TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
+  const auto dir = test::temp_dir("cli_resume");
+  const std::string csv = (dir / "k.csv").string(), full = (dir / "full.csv").string();
+  const std::string sweep = "run --scene sphere --schemes bvh_single,mbvh8_single,kd_single --workloads "
+                            "primary,bounce:1,shadow --width 64 --height 64 --csv ";
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const std::string cmd = std::string(TRAVBENCH_BINARY) + " " + sweep + csv + " --reps 20 2>/dev/null";
+    execl("/bin/sh", "sh", "-c", ("exec " + cmd).c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  while (lines_of(csv).size() < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60))
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFSIGNALED(status)) << "the sweep ended before the kill: give it more --reps";
+  const std::set<std::string> kept = cells_of(csv);
+  ASSERT_GE(kept.size(), 1u);
+  ASSERT_LT(kept.size(), 9u);
+  const std::string sidecar = (dir / "k.json").string();
+  ASSERT_TRUE(std::filesystem::exists(sidecar)) << "the sidecar is written first";
+  EXPECT_NE(lines_of(sidecar).size(), 0u);
+
+  // Other settings than the killed sweep's: refused, saying which.
+  const Result other = travbench(sweep + csv + " --reps 2 --resume");
+  EXPECT_EQ(other.code, 2) << other.out;
+  EXPECT_NE(other.out.find("reps"), std::string::npos) << other.out;
+  const Result resumed = travbench(sweep + csv + " --reps 20 --resume");
+  ASSERT_EQ(resumed.code, 0) << resumed.out;
+  EXPECT_NE(resumed.out.find("in the CSV already"), std::string::npos) << resumed.out;
+  ASSERT_EQ(travbench(sweep + full + " --reps 1").code, 0);
+  const std::set<std::string> done = cells_of(csv);
+  EXPECT_EQ(done, cells_of(full));
+  EXPECT_EQ(done.size(), 9u);
+  for (const auto& c : kept) EXPECT_TRUE(done.count(c)) << c;
+  const std::vector<std::string> lines = lines_of(csv);
+  for (size_t i = 1; i < lines.size(); ++i) EXPECT_NE(lines[i].rfind("scene,", 0), 0u) << "header written twice";
+  std::ifstream js(sidecar);
+  const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_NE(meta.find("\"complete\""), std::string::npos) << meta;
+  std::filesystem::remove_all(dir);
 }
 
 TEST(CLI, BadInputGivesOneLineAndNonZeroExit) {
