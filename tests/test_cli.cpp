@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <set>
 #include <thread>
@@ -194,6 +195,25 @@ std::set<std::string> cells_of(const std::string& path) {
   return cells;
 }
 
+// Starts travbench with `args` and SIGKILLs it as soon as `csv` holds a row; false when it ended
+// on its own first.
+bool killed_after_first_row(const std::string& args, const std::string& csv) {
+  const pid_t pid = fork();
+  if (pid < 0) return false;
+  if (pid == 0) {
+    const std::string cmd = "exec " + std::string(TRAVBENCH_BINARY) + " " + args + " >/dev/null 2>&1";
+    execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  while (lines_of(csv).size() < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60))
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFSIGNALED(status);
+}
+
 // Issue 20, "sweeps that lose nothing": a run killed with SIGKILL after its first cells keeps
 // every finished cell (whole rows, header once), and --resume completes it with no duplicate
 // row and the cells an uninterrupted run has. Enough repetitions that the sweep is still running
@@ -203,20 +223,7 @@ TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
   const std::string csv = (dir / "k.csv").string(), full = (dir / "full.csv").string();
   const std::string sweep = "run --scene sphere --schemes bvh_single,mbvh8_single,kd_single --workloads "
                             "primary,bounce:1,shadow --width 64 --height 64 --csv ";
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    const std::string cmd = std::string(TRAVBENCH_BINARY) + " " + sweep + csv + " --reps 20 2>/dev/null";
-    execl("/bin/sh", "sh", "-c", ("exec " + cmd).c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  while (lines_of(csv).size() < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60))
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  kill(pid, SIGKILL);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFSIGNALED(status)) << "the sweep ended before the kill: give it more --reps";
+  ASSERT_TRUE(killed_after_first_row(sweep + csv + " --reps 20", csv)) << "the sweep ended before the kill";
   const std::set<std::string> kept = cells_of(csv);
   ASSERT_GE(kept.size(), 1u);
   ASSERT_LT(kept.size(), 9u);
@@ -241,6 +248,25 @@ TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
   std::ifstream js(sidecar);
   const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
   EXPECT_NE(meta.find("\"complete\""), std::string::npos) << meta;
+  std::filesystem::remove_all(dir);
+}
+
+// A table streams its measured cells too: killed after the first, its CSV holds whole rows under
+// one header and the sidecar says the table did not finish.
+TEST(CLI, KilledTableKeepsItsCells) {
+  const auto dir = test::temp_dir("cli_table_kill");
+  const std::string csv = (dir / "b.csv").string();
+  ASSERT_TRUE(killed_after_first_row("table bounce --scene sphere --schemes bvh_single,mbvh8_single --width 64 "
+                                     "--height 64 --reps 20 --csv " + csv, csv))
+      << "the table ended before the kill";
+  const std::vector<std::string> lines = lines_of(csv);
+  ASSERT_GE(lines.size(), 2u);
+  EXPECT_LT(lines.size(), 9u);
+  auto fields = [](const std::string& line) { return std::count(line.begin(), line.end(), ',') + 1; };
+  for (size_t i = 1; i < lines.size(); ++i) EXPECT_EQ(fields(lines[i]), fields(lines[0])) << lines[i];
+  std::ifstream js(dir / "b.json");
+  const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_NE(meta.find("\"running\""), std::string::npos) << meta;
   std::filesystem::remove_all(dir);
 }
 
