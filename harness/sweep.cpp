@@ -85,9 +85,16 @@ CellStream::CellStream(std::string path, nlohmann::json meta, bool resume, const
       resumed_ = records_.size();
     }
   }
-  fd_ = ::open(path_.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (cols_.empty() ? O_TRUNC : O_APPEND), 0644);
-  if (fd_ < 0) throw InputError(path_ + ": cannot open for writing (" + std::strerror(errno) + ")");
   empty_file_ = cols_.empty();
+}
+
+// On the first row (or at the end of a sweep without any): a sweep that fails before it measures
+// anything (a bad --param a table checks, a scheme that cannot be built) leaves an older CSV of the
+// same name as it was.
+void CellStream::open() {
+  if (fd_ >= 0) return;
+  fd_ = ::open(path_.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (empty_file_ ? O_TRUNC : O_APPEND), 0644);
+  if (fd_ < 0) throw InputError(path_ + ": cannot open for writing (" + std::strerror(errno) + ")");
   meta_["status"] = "running";
   write_sidecar(path_, meta_);
 }
@@ -107,6 +114,7 @@ void CellStream::rewrite() {
 }
 
 void CellStream::append(const Record& r) {
+  open();
   records_.push_back(r);
   keys_.insert(cell_key(r));
   bool new_column = false;
@@ -119,6 +127,7 @@ void CellStream::append(const Record& r) {
 }
 
 void CellStream::finish(const nlohmann::json& extra) {
+  open();
   meta_.update(extra);
   meta_["status"] = "complete";
   meta_["rows"] = records_.size();

@@ -2,8 +2,9 @@
 // run killed after 50 minutes (Ctrl-C, SIGKILL, a full disk, a reboot) keeps every finished cell,
 // and `run --resume` measures only the cells the CSV does not hold yet.
 //
-// The sidecar JSON is written first (status "running", with the sweep's identity: scene hash,
-// git revision, image size, seed, reps, ...) and rewritten at the end (status "complete"). Each
+// The sidecar JSON is written first, before the first row (status "running", with the sweep's
+// identity: scene hash, git revision, image size, seed, reps, ...), and rewritten at the end
+// (status "complete"). Each
 // row is one write(2) of the whole line followed by fsync(2): after a kill the file ends at a row
 // boundary, or (a kill inside the write) with one torn line, which a resume cuts off.
 #pragma once
@@ -28,7 +29,8 @@ class CellStream {
   // Opens `path` for a new sweep (truncating it) or, with `resume`, keeps its cells when its
   // sidecar's values of every key of `must_match` equal those of `meta`; otherwise throws
   // InputError saying which value differs (or that the sidecar is missing). A missing CSV with
-  // `resume` starts a fresh sweep. Writes the sidecar (provenance + meta, status "running").
+  // `resume` starts a fresh sweep. Nothing is written until the first row: then the sidecar
+  // (provenance + meta, status "running"), then the CSV.
   CellStream(std::string path, nlohmann::json meta, bool resume, const std::vector<std::string>& must_match);
   ~CellStream();
   CellStream(const CellStream&) = delete;
@@ -45,6 +47,7 @@ class CellStream {
   void finish(const nlohmann::json& extra = nlohmann::json::object());
 
  private:
+  void open();
   void rewrite();
   std::string path_;
   nlohmann::json meta_;
