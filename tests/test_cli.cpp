@@ -267,6 +267,10 @@ TEST(CLI, KilledTableKeepsItsCells) {
   std::ifstream js(dir / "b.json");
   const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
   EXPECT_NE(meta.find("\"running\""), std::string::npos) << meta;
+  // A table that fails before it measures anything (a bad --param) leaves the CSV there as it was.
+  const Result bad = travbench("table bounce --scene sphere --param bogus=1 --csv " + csv);
+  EXPECT_EQ(bad.code, 2) << bad.out;
+  EXPECT_EQ(lines_of(csv), lines);
   std::filesystem::remove_all(dir);
 }
 
