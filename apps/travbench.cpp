@@ -18,6 +18,8 @@
 #include "cachesim/din_trace.h"
 #include "harness/compare.h"
 #include "harness/experiment.h"
+#include "harness/image.h"
+#include "harness/sweep.h"
 #include "harness/tables.h"
 #include "harness/trace_runner.h"
 #include "structures/builtin_scenes.h"
@@ -185,6 +187,9 @@ int main(int argc, char** argv) {
   run->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
   run->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru")->check(kPolicy);
   run->get_option("--csv")->required();
+  bool resume = false;
+  run->add_flag("--resume", resume,
+                "keep the cells --csv holds from an interrupted run of the same sweep and measure only the rest");
 
   std::string table_name;
   auto* table = app.add_subcommand("table", "Reproduce a thesis table -> CSV + terminal table");
@@ -209,6 +214,22 @@ int main(int argc, char** argv) {
   trace->add_option("--scheme", scheme_arg, "scheme name")->required()->check(kScheme);
   trace->add_option("--rays", rays_in, "ray file to read")->required();
   trace->add_option("--hits", hits_out, "hit file to write")->check(kOutputFile);
+
+  ImageOptions io;
+  auto* image = app.add_subcommand("image", "Per-pixel heat map of one scheme's traversal cost on a workload -> PNG");
+  add_scene(image);
+  image->add_option("--scheme", io.scheme, "scheme name")->required()->check(kScheme);
+  image->add_option("--workload", io.workload, "camera workload: primary, divergence:D, bounce:k, shadow")->check(kWorkload);
+  image->add_option("--metric", io.metric, "nodes | leaves | tris (per ray) | time (ns per ray) | shade (|n.d|)")
+      ->check(CLI::IsMember(image_metrics()));
+  image->add_option("--view", ro.view, "camera view (1-3, or as many as the scene lists)")->check(view_range);
+  image->add_option("--width", io.width, "image width")->check(CLI::Range(16, 4096));
+  image->add_option("--height", io.height, "image height")->check(CLI::Range(16, 4096));
+  image->add_option("--packet", io.packet, "0: the workload's packets; N: packets of N rays (1: per ray)")
+      ->check(CLI::Range(0, 65536));
+  image->add_option("--kernel", kernel, "triangle kernel: watertight | moller | plane | plane_rcp")->check(kKernel);
+  image->add_option("--param", params, "scheme parameter key=value (repeatable)")->check(kParam);
+  image->add_option("--out", io.out, "PNG file to write")->required()->check(kOutputFile);
 
   std::string cache_config = "l1=32K:8,l2=256K:8,l3=2M:16", policy = "plru", trace_path;
   auto* cachesim = app.add_subcommand("cachesim", "Replay a Dinero IV din trace through the cache simulator");
@@ -254,6 +275,10 @@ int main(int argc, char** argv) {
     apply_params(ro.scheme_config, params, kernel);
     // Parameters are checked before any scene is loaded (tables check theirs against their schemes).
     if (*run) check_run_params(expand_scheme_list(schemes_arg), ro.scheme_config);
+    if (*image) {
+      io.scheme_config = ro.scheme_config;
+      check_image_options(io);
+    }
     if (*trace) {
       check_run_params({scheme_arg}, ro.scheme_config);
       if (hits_out.empty() && csv_path.empty())
@@ -284,11 +309,13 @@ int main(int argc, char** argv) {
       for (std::string w; std::getline(ss, w, ',');)
         if (!w.empty()) ro.workloads.push_back(parse_workload(w).name());
       if (ro.workloads.empty()) throw InputError("--workloads is empty");
-      const auto records = run_experiment(bench, ro);
-      write_csv(csv_path, records,
-                {{"command", "run"}, {"scene", scene_arg}, {"scene_hash", bench.scene().content_hash()},
-                 {"seed", ro.seed}, {"width", ro.width}, {"height", ro.height}});
+      run_sweep(bench, ro, scene_arg, csv_path, resume);
       std::fprintf(stderr, "wrote %s\n", csv_path.c_str());
+      return 0;
+    }
+    if (*image) {
+      io.view = ro.view;
+      run_image(bench, io, bench.scene().name);
       return 0;
     }
     if (*rays) {

@@ -7,6 +7,7 @@
 
 #include "harness/accuracy.h"
 #include "harness/cache_columns.h"
+#include "harness/sweep.h"
 #include "harness/trace_runner.h"
 #include "traversal/exact.h"
 #include "traversal/registry.h"
@@ -43,8 +44,16 @@ const std::vector<Hit>& Bench::reference_hits(const WorkloadSpec& spec, int thre
 
 Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt) {
   std::vector<Hit> hits;
-  return measure_rays(bench, spec.name(), bench.rays(spec), bench.reference_hits(spec, std::max(2, opt.threads)),
-                      scheme, opt, hits);
+  Record r = measure_rays(bench, spec.name(), bench.rays(spec), bench.reference_hits(spec, std::max(2, opt.threads)),
+                          scheme, opt, hits);
+  if (opt.cells) opt.cells->append(r);
+  return r;
+}
+
+std::string params_text(const std::string& scheme, const SchemeConfig& cfg) {
+  std::string params;
+  for (const auto& [k, v] : config_for(scheme, cfg).params) params += (params.empty() ? "" : ";") + k + "=" + v;
+  return params;
 }
 
 std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, int threads) {
@@ -112,15 +121,13 @@ Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& b
   // Every repetition's Mrays/s in run order, for `travbench compare`'s Mann-Whitney U test, and
   // the scheme's parameters as the run gave them, so cells of runs with different parameters
   // never match.
-  std::string samples, params;
+  std::string samples;
   for (double sec : tp.seconds) {
     char buf[32];
     std::snprintf(buf, sizeof buf, "%s%.6g", samples.empty() ? "" : ";", double(batch.size()) / std::max(sec, 1e-9) * 1e-6);
     samples += buf;
   }
-  for (const auto& [k, v] : config_for(std::string(scheme.name()), opt.scheme_config).params)
-    params += (params.empty() ? "" : ";") + k + "=" + v;
-  r.set("mrays_samples", samples).set("params", params);
+  r.set("mrays_samples", samples).set("params", params_text(std::string(scheme.name()), opt.scheme_config));
   return r;
 }
 
@@ -138,6 +145,8 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
   }
   const size_t total = opt.workloads.size() * schemes.size();
   size_t done = 0;
+  RunOptions cell_opt = opt;
+  cell_opt.cells = nullptr;  // appended below, once prepare_ms is in the row
   for (const auto& w : opt.workloads) {
     WorkloadSpec spec = parse_workload(w);
     spec.width = opt.width;
@@ -145,8 +154,17 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
     spec.view = opt.view;
     spec.seed = opt.seed;
     for (size_t s = 0; s < schemes.size(); ++s) {
-      Record r = measure_cell(bench, spec, *schemes[s], opt);
+      const std::string name(schemes[s]->name());
+      if (opt.cells && opt.cells->has(cell_key(spec.name(), name, std::string(kernel_name(opt.scheme_config.kernel)),
+                                               std::to_string(opt.view + 1), params_text(name, opt.scheme_config)))) {
+        if (opt.progress)
+          std::fprintf(stderr, "[%zu/%zu] %-16s %-14s (in the CSV already)\n", ++done, total, name.c_str(),
+                       spec.name().c_str());
+        continue;
+      }
+      Record r = measure_cell(bench, spec, *schemes[s], cell_opt);
       r.set("prepare_ms", prepare_ms[s]);
+      if (opt.cells) opt.cells->append(r);
       if (opt.progress)
         std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %8s Mrays/s  mismatch %s\n", ++done, total,
                      schemes[s]->name().data(), spec.name().c_str(), r.get("mrays_median")->c_str(),
@@ -154,7 +172,7 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
       out.push_back(std::move(r));
     }
   }
-  return out;
+  return opt.cells ? opt.cells->records() : out;
 }
 
 }  // namespace tb

@@ -11,6 +11,8 @@
 
 namespace tb {
 
+class CellStream;  // harness/sweep.h
+
 struct RunOptions {
   std::vector<std::string> schemes;
   std::vector<std::string> workloads;
@@ -24,6 +26,9 @@ struct RunOptions {
   uint64_t seed = 1;
   SchemeConfig scheme_config;
   bool progress = true;
+  // Where each finished cell goes as it completes (harness/sweep.h); measure_cell appends to it
+  // (the tables' cells), run_experiment appends its rows itself and skips the cells it holds.
+  CellStream* cells = nullptr;
 };
 
 // A scene with its structure cache, reference and generated workloads: what several tables share.
@@ -60,6 +65,10 @@ std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, in
 // Every scheme of opt.schemes on every workload; --param keys are checked against the run's
 // schemes as a whole (check_run_params), each scheme sees those it declares.
 
+// With opt.cells, a cell the stream already holds (a resumed sweep) is not measured again, and the
+// result is the stream's rows (the resumed ones first).
 std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt);
+// The `params` column: the scheme's parameters as the run gave them (its declared keys only).
+std::string params_text(const std::string& scheme, const SchemeConfig& cfg);
 
 }  // namespace tb

@@ -1,6 +1,11 @@
 #include "harness/records.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <chrono>
 #include <cstdio>
 #include <ctime>
@@ -71,29 +76,64 @@ nlohmann::json provenance() {
           {"date", date}};
 }
 
-void write_csv(const std::string& path, const std::vector<Record>& records, const nlohmann::json& extra) {
+std::vector<std::string> columns_of(const std::vector<Record>& records) {
   std::vector<std::string> cols;
   for (const auto& r : records)
     for (const auto& f : r.fields())
       if (std::find(cols.begin(), cols.end(), f.first) == cols.end()) cols.push_back(f.first);
-  std::ofstream out(path);
-  if (!out) throw InputError(path + ": cannot open for writing");
-  for (size_t i = 0; i < cols.size(); ++i) out << (i ? "," : "") << quote(cols[i]);
-  out << "\n";
-  for (const auto& r : records) {
-    for (size_t i = 0; i < cols.size(); ++i) {
-      const std::string* v = r.get(cols[i]);
-      out << (i ? "," : "") << (v ? quote(*v) : "");
-    }
-    out << "\n";
+  return cols;
+}
+
+std::string csv_line(const std::vector<std::string>& cols, const Record* r) {
+  std::string line;
+  for (size_t i = 0; i < cols.size(); ++i) {
+    const std::string* v = r ? r->get(cols[i]) : &cols[i];
+    line += (i ? "," : "") + (v ? quote(*v) : std::string());
   }
-  if (!out) throw InputError(path + ": write failed");
+  return line + "\n";
+}
+
+std::string sidecar_path(const std::string& csv_path) {
+  std::string json_path = csv_path;
+  if (json_path.size() > 4 && json_path.substr(json_path.size() - 4) == ".csv") json_path.resize(json_path.size() - 4);
+  return json_path + ".json";
+}
+
+// Written to a temporary file beside `path`, fsync'd, then renamed over it: a reader (or a kill)
+// sees the old file or the new one, never half of either.
+void write_file_durably(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw InputError(path + ": cannot open for writing (" + std::strerror(errno) + ")");
+  bool ok = true;
+  for (size_t off = 0; ok && off < text.size();) {
+    const ssize_t n = ::write(fd, text.data() + off, text.size() - off);
+    ok = n > 0;
+    off += ok ? size_t(n) : 0;
+  }
+  ok = ok && ::fsync(fd) == 0;
+  const int err = errno;
+  ok = ::close(fd) == 0 && ok;
+  if (!ok || std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw InputError(path + ": write failed (" + std::strerror(ok ? errno : err) + ")");
+  }
+}
+
+void write_sidecar(const std::string& csv_path, const nlohmann::json& meta) {
+  write_file_durably(sidecar_path(csv_path), meta.dump(2) + "\n");
+}
+
+void write_csv(const std::string& path, const std::vector<Record>& records, const nlohmann::json& extra) {
+  const std::vector<std::string> cols = columns_of(records);
+  std::string text = csv_line(cols, nullptr);
+  for (const auto& r : records) text += csv_line(cols, &r);
+  write_file_durably(path, text);
   nlohmann::json meta = provenance();
   meta.update(extra);
-  std::string json_path = path;
-  if (json_path.size() > 4 && json_path.substr(json_path.size() - 4) == ".csv") json_path.resize(json_path.size() - 4);
-  std::ofstream js(json_path + ".json");
-  js << meta.dump(2) << "\n";
+  meta["status"] = "complete";
+  meta["rows"] = records.size();
+  write_sidecar(path, meta);
 }
 
 void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out) {

@@ -25,9 +25,16 @@ class Record {
 };
 
 // Writes `records` to `path` (CSV, RFC 4180 quoting) and `path` with .json for .csv (the
-// provenance sidecar, `extra` merged into it). Throws InputError when the file cannot be written.
+// provenance sidecar, `extra` merged into it, status "complete"); both replace the old files
+// atomically. Throws InputError when the file cannot be written.
 void write_csv(const std::string& path, const std::vector<Record>& records, const nlohmann::json& extra = {});
 nlohmann::json provenance();
+// The pieces write_csv is made of, shared with the streaming writer of harness/sweep.h.
+std::vector<std::string> columns_of(const std::vector<Record>& records);  // first-seen order
+std::string csv_line(const std::vector<std::string>& cols, const Record* r);  // nullptr: the header
+std::string sidecar_path(const std::string& csv_path);                     // x.csv -> x.json
+void write_file_durably(const std::string& path, const std::string& text);  // temporary + fsync + rename
+void write_sidecar(const std::string& csv_path, const nlohmann::json& meta);
 // Prints records as an aligned text table (the terminal view of a CSV).
 void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out);
 

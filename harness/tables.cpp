@@ -5,6 +5,7 @@
 #include <map>
 
 #include "harness/accuracy.h"
+#include "harness/sweep.h"
 #include "structures/builtin_scenes.h"
 #include "traversal/registry.h"
 #include "workloads/hard_cases.h"
@@ -154,7 +155,13 @@ int run_table(const std::string& name, const TableOptions& opt) {
     for (const auto& n : table_names()) known += " " + n;
     throw InputError("unknown table '" + name + "' (available:" + known + ")");
   }
-  return it->second(opt);
+  if (opt.csv.empty()) return it->second(opt);
+  // Each measured cell goes to the CSV as it finishes, so a killed table keeps them; the table's
+  // own write_csv at the end replaces the file (atomically) with its finished rows.
+  CellStream cells(opt.csv, {{"command", "table " + name}, {"scene", table_scene(opt)}}, false, {});
+  TableOptions streamed = opt;
+  streamed.run.cells = &cells;
+  return it->second(streamed);
 }
 
 }  // namespace tb

@@ -5,23 +5,24 @@
 # FOLDER: every scene file in it (e.g. ../shared/scenes).
 # The default suite takes 4-8 minutes per scene on 2 cores (measured: room 4; Sponza and Conference
 # 11 together); --quick ~1 minute (small images, 1 rep). --steps picks a subset of
-# run,divergence,bounce,raygrid,cache,accuracy,hard,build,simt (default: all; hard: every scheme's
+# run,divergence,bounce,raygrid,cache,accuracy,hard,build,simt,image (default: all; hard: every scheme's
 # default kernel on the hard:* workloads, hard_cases.csv; simt is the SIMT warp model of thesis
-# Tables 12-13, docs/SIMT.md, ~2 minutes per real scene). --scaling adds the scaling
+# Tables 12-13, docs/SIMT.md, ~2 minutes per real scene; image: one heat map per scheme family,
+# heat_<scheme>_<metric>.png, `travbench image`). --scaling adds the scaling
 # table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory) under results/spheres/.
 # Ends with the performance-goal ratios of each scene (scripts/goals.py).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=0
 scaling=0
-want=run,divergence,bounce,raygrid,cache,accuracy,hard,build,simt
+want=run,divergence,bounce,raygrid,cache,accuracy,hard,build,simt,image
 scenes=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) quick=1 ;;
     --scaling) scaling=1 ;;
     --steps) want=${2:?--steps needs a list}; shift ;;
-    -h|--help) sed -n 2,10p "$0"; exit 0 ;;
+    -h|--help) sed -n 2,13p "$0"; exit 0 ;;
     -*) echo "run.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
     *)
       if [ -d "$1" ]; then
@@ -45,9 +46,11 @@ rm -f "$buildlog"
 TB=build/travbench
 if [ $quick -eq 1 ]; then
   big=(--width 128 --height 128 --reps 1); small=(--width 64 --height 64 --reps 1); hard=("${small[@]}")
+  img=(--width 128 --height 128)
 else
   big=(--width 512 --height 512 --reps 5); small=(--width 256 --height 256 --reps 3)
   hard=(--width 256 --height 256 --reps 1)  # an accuracy check: one timed repetition is enough
+  img=(--width 320 --height 240)
 fi
 hard_workloads=$($TB list workloads | grep '^hard:' | paste -sd, -)
 tables=$($TB list tables)
@@ -67,26 +70,42 @@ for scene in "${scenes[@]}"; do
   grep -qw hard <<<"${want//,/ }" && steps+=("$TB run --scene $scene --schemes all --workloads $hard_workloads ${hard[*]} --csv $out/hard_cases.csv")
   has build && steps+=("$TB table build --scene $scene --reps 3 --csv $out/build.csv")
   has simt && steps+=("$TB table simt --scene $scene ${big[*]} --csv $out/simt.csv")
+  if grep -qw image <<<"${want//,/ }"; then
+    # One per scheme family: the single-ray ones per ray (--packet 1), the stream scheme per packet
+    # (what it does is per packet), Embree by time (it has no counters), and |n.d| to see the camera.
+    for heat in "bvh_single nodes 1" "mbvh8_single nodes 1" "kd_single nodes 1" "raygrid nodes 0" \
+                "embree_single time 1" "bvh_single shade 0"; do
+      read -r hs hm hp <<<"$heat"
+      steps+=("$TB image --scene $scene --scheme $hs --metric $hm --packet $hp ${img[*]} --out $out/heat_${hs}_${hm}.png")
+    done
+  fi
 done
 if [ $scaling -eq 1 ]; then
   steps+=("$TB table scaling ${small[*]} --csv results/spheres/scaling.csv")
 fi
 
 # One line of progress per step on stderr; each step's own output goes to its log beside the CSV.
+# A step writes into a fresh staging folder and its outputs (the files named like its last
+# argument: X.csv, X.json, X.log, X.png) move into results/ only when it finished, so an
+# interrupted re-run never leaves committed results half overwritten.
 total=${#steps[@]}
 i=0
 start=$(date +%s)
+stage=$(mktemp -d results/.staging.XXXXXX)
+trap 'rm -rf "$stage"' EXIT
 for step in "${steps[@]}"; do
   i=$((i + 1))
-  csv=${step##* }
+  dest=${step##* }
+  tmp=$stage/$i/$(basename "$dest")
   bar=$(printf '%*s' $((i * 30 / total)) '' | tr ' ' '#')
-  printf '[%-30s] %d/%d %s (%ds)\n' "$bar" "$i" "$total" "${csv}" $(( $(date +%s) - start )) >&2
-  mkdir -p "$(dirname "$csv")"
-  if ! $step >"${csv%.csv}.log" 2>&1; then
+  printf '[%-30s] %d/%d %s (%ds)\n' "$bar" "$i" "$total" "${dest}" $(( $(date +%s) - start )) >&2
+  mkdir -p "$(dirname "$tmp")" "$(dirname "$dest")"
+  if ! ${step% *} "$tmp" >"${tmp%.*}.log" 2>&1; then
     echo "step failed: $step" >&2
-    tail -3 "${csv%.csv}.log" >&2
+    tail -3 "${tmp%.*}.log" >&2
     exit 1
   fi
+  mv -f "$(dirname "$tmp")"/* "$(dirname "$dest")"/
 done
 folders=()
 for scene in "${scenes[@]}"; do name=$(basename "$scene"); folders+=("results/${name%.*}"); done

@@ -21,6 +21,8 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <memory>
+#include <numbers>
 #include <type_traits>
 
 #include "structures/scene_loader.h"
@@ -128,18 +130,30 @@ struct Elements {
   size_t count = 0;
   int component = 0;
   bool normalized = false;
+  std::shared_ptr<std::vector<unsigned char>> owned;  // a sparse accessor's elements, made dense
 };
+
+// `bytes` bytes at `offset` into buffer view `view`, proven to lie inside it and its buffer.
+const unsigned char* view_bytes(const tinygltf::Model& m, int view, size_t offset, size_t bytes, const std::string& path,
+                                const std::string& wa) {
+  if (view < 0 || static_cast<size_t>(view) >= m.bufferViews.size())
+    throw InputError(error_line(path, wa + "bufferView " + std::to_string(view) + " does not exist"));
+  const tinygltf::BufferView& bv = m.bufferViews[static_cast<size_t>(view)];
+  if (bv.buffer < 0 || static_cast<size_t>(bv.buffer) >= m.buffers.size())
+    throw InputError(error_line(path, wa + "bufferView " + std::to_string(view) + " names buffer " +
+                                          std::to_string(bv.buffer) + ", which does not exist"));
+  const tinygltf::Buffer& buf = m.buffers[static_cast<size_t>(bv.buffer)];
+  if (bv.byteOffset > buf.data.size() || bv.byteLength > buf.data.size() - bv.byteOffset || offset > bv.byteLength ||
+      bytes > bv.byteLength - offset)
+    throw InputError(error_line(path, wa + std::to_string(bytes) + " bytes at offset " + std::to_string(offset) +
+                                          " do not fit in bufferView " + std::to_string(view)));
+  return buf.data.data() + bv.byteOffset + offset;
+}
 
 // implicit_limit: the most elements an accessor without bufferView (all zeros, spec §3.6.2.3) may
 // declare. Nothing backs such a count, so without a bound a one-line header could ask for gigabytes.
-Elements resolve_accessor(const tinygltf::Model& m, int index, const std::string& path, const std::string& where,
-                          size_t implicit_limit) {
-  if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
-    throw InputError(error_line(path, where + "accessor " + std::to_string(index) + " does not exist (" +
-                                          std::to_string(m.accessors.size()) + " accessors)"));
-  const tinygltf::Accessor& a = m.accessors[static_cast<size_t>(index)];
-  const std::string wa = where + "accessor " + std::to_string(index) + ": ";
-  if (a.sparse.isSparse) throw InputError(error_line(path, wa + "sparse accessors are not supported"));
+Elements resolve_dense(const tinygltf::Model& m, const tinygltf::Accessor& a, const std::string& path,
+                       const std::string& wa, size_t implicit_limit) {
   const int csize = component_size(a.componentType);
   const int ncomp = component_count(a.type);
   if (csize == 0 || ncomp == 0) throw InputError(error_line(path, wa + "invalid componentType or type"));
@@ -183,6 +197,49 @@ Elements resolve_accessor(const tinygltf::Model& m, int index, const std::string
                                             std::to_string(avail) + " bytes)"));
   }
   e.data = buf.data.data() + bv.byteOffset + a.byteOffset;
+  return e;
+}
+
+uint32_t read_index(const unsigned char* p, int type);  // below, with the other element readers
+
+Elements resolve_accessor(const tinygltf::Model& m, int index, const std::string& path, const std::string& where,
+                          size_t implicit_limit) {
+  if (index < 0 || static_cast<size_t>(index) >= m.accessors.size())
+    throw InputError(error_line(path, where + "accessor " + std::to_string(index) + " does not exist (" +
+                                          std::to_string(m.accessors.size()) + " accessors)"));
+  const tinygltf::Accessor& a = m.accessors[static_cast<size_t>(index)];
+  const std::string wa = where + "accessor " + std::to_string(index) + ": ";
+  Elements e = resolve_dense(m, a, path, wa, implicit_limit);
+  if (!a.sparse.isSparse) return e;
+  // Sparse (glTF 2.0 §3.6.2.4): the base elements (its bufferView, or zeros) with `count` of them
+  // replaced; made dense here, so the readers below see one layout.
+  const size_t elem = static_cast<size_t>(component_size(a.componentType)) * static_cast<size_t>(component_count(a.type));
+  if (a.sparse.count < 1 || static_cast<size_t>(a.sparse.count) > e.count)
+    throw InputError(error_line(path, wa + "sparse count " + std::to_string(a.sparse.count) + " is not in 1.." +
+                                          std::to_string(e.count)));
+  const int itype = a.sparse.indices.componentType;
+  if (itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+      itype != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+    throw InputError(error_line(path, wa + "sparse indices must be unsigned byte/short/int"));
+  const size_t n = static_cast<size_t>(a.sparse.count), isize = static_cast<size_t>(component_size(itype));
+  if (a.sparse.indices.byteOffset < 0 || a.sparse.values.byteOffset < 0)
+    throw InputError(error_line(path, wa + "sparse byteOffset is negative"));
+  const unsigned char* ip = view_bytes(m, a.sparse.indices.bufferView, static_cast<size_t>(a.sparse.indices.byteOffset),
+                                       n * isize, path, wa + "sparse indices: ");
+  const unsigned char* vp = view_bytes(m, a.sparse.values.bufferView, static_cast<size_t>(a.sparse.values.byteOffset),
+                                       n * elem, path, wa + "sparse values: ");
+  e.owned = std::make_shared<std::vector<unsigned char>>(e.count * elem, 0);
+  if (e.data)
+    for (size_t i = 0; i < e.count; ++i) std::memcpy(e.owned->data() + i * elem, e.data + i * e.stride, elem);
+  for (size_t k = 0; k < n; ++k) {
+    const uint32_t i = read_index(ip + k * isize, itype);
+    if (i >= e.count)
+      throw InputError(error_line(path, wa + "sparse index " + std::to_string(i) + " is out of range for " +
+                                            std::to_string(e.count) + " elements"));
+    std::memcpy(e.owned->data() + size_t(i) * elem, vp + k * elem, elem);
+  }
+  e.data = e.owned->data();
+  e.stride = elem;
   return e;
 }
 
@@ -246,7 +303,14 @@ class Builder {
     if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN)
       throw InputError(error_line(path_, where + "unknown primitive mode " + std::to_string(mode)));
     auto pos_it = prim.attributes.find("POSITION");
-    if (pos_it == prim.attributes.end()) return;  // spec: primitives without positions are not rendered
+    if (pos_it == prim.attributes.end()) {
+      // A Draco-compressed primitive may carry no uncompressed fallback: its triangles exist, but
+      // only as Draco data this loader cannot decode; skipping it would silently drop geometry.
+      if (prim.extensions.count("KHR_draco_mesh_compression"))
+        throw InputError(error_line(path_, where + "is Draco-compressed (KHR_draco_mesh_compression) without an "
+                                                   "uncompressed POSITION; this loader does not decode Draco"));
+      return;  // spec: primitives without positions are not rendered
+    }
 
     const std::string wp = where + "POSITION ";
     Elements pos = resolve_accessor(m_, pos_it->second, path_, wp, implicit_limit_);
@@ -351,6 +415,38 @@ bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, in
   return true;
 }
 
+// A perspective camera placed by its node's world matrix becomes a view (glTF 2.0 §3.10: the
+// camera looks down its local -Z with +Y up). Orthographic cameras have no pinhole equivalent in
+// workloads/camera.h and are left out. Views are in traversal order, so `--view N` is the N-th
+// camera met depth first.
+void add_camera(const tinygltf::Model& m, int index, const Mat4& world, const std::string& path, const std::string& via,
+                Scene& s) {
+  if (static_cast<size_t>(index) >= m.cameras.size())
+    throw InputError(error_line(path, via + "camera " + std::to_string(index) + " does not exist (" +
+                                          std::to_string(m.cameras.size()) + " cameras)"));
+  const tinygltf::Camera& c = m.cameras[static_cast<size_t>(index)];
+  if (c.type != "perspective") return;
+  const double yfov = c.perspective.yfov;
+  if (!(yfov > 0 && yfov < std::numbers::pi))
+    throw InputError(error_line(path, "camera " + std::to_string(index) + ": yfov " + std::to_string(yfov) +
+                                          " is not in (0, pi) radians"));
+  auto apply = [&](double x, double y, double z, double w) {
+    return Vec3{static_cast<float>(world[0] * x + world[4] * y + world[8] * z + world[12] * w),
+                static_cast<float>(world[1] * x + world[5] * y + world[9] * z + world[13] * w),
+                static_cast<float>(world[2] * x + world[6] * y + world[10] * z + world[14] * w)};
+  };
+  CameraView v;
+  v.name = c.name.empty() ? "camera " + std::to_string(index) : c.name;
+  v.eye = apply(0, 0, 0, 1);
+  const Vec3 fwd = apply(0, 0, -1, 0), up = apply(0, 1, 0, 0);
+  if (!is_finite(v.eye) || !(length(fwd) > 0) || !(length(up) > 0) || !(length(cross(fwd, up)) > 0))
+    throw InputError(error_line(path, via + "camera " + std::to_string(index) + ": its node transform is degenerate"));
+  v.target = v.eye + normalize(fwd);
+  v.up = normalize(up);
+  v.vfov_deg = static_cast<float>(yfov * 180.0 / std::numbers::pi);
+  s.views.push_back(v);
+}
+
 Scene build_scene(const tinygltf::Model& m, const std::string& path, size_t file_bytes) {
   for (const std::string& ext : m.extensionsRequired)
     if (ext == "KHR_draco_mesh_compression" || ext == "EXT_meshopt_compression" || ext == "KHR_meshopt_compression" ||
@@ -408,6 +504,7 @@ Scene build_scene(const tinygltf::Model& m, const std::string& path, size_t file
     const tinygltf::Node& node = m.nodes[ni];
     const Mat4 world = mul(item.parent, local_matrix(node, path, ni));
     if (node.mesh >= 0) b.add_mesh(node.mesh, world, "node " + std::to_string(ni) + ": ");
+    if (node.camera >= 0) add_camera(m, node.camera, world, path, "node " + std::to_string(ni) + ": ", s);
     for (auto it = node.children.rbegin(); it != node.children.rend(); ++it) stack.push_back({*it, world});
   }
   return s;

@@ -180,7 +180,8 @@ Scene load_scene_file(const std::string& path) {
   // Primitive ids are uint32 and 0xFFFFFFFF means "no hit" (DESIGN.md, hits file).
   if (s.triangles.size() >= 0xFFFFFFFFull || s.positions.size() >= 0xFFFFFFFFull)
     throw InputError(detail::error_line(path, "more than 2^32-2 triangles or vertices"));
-  s.views = views_from_scenes_json(path);
+  // scenes.json wins; without an entry there, the file's own cameras (glTF) are the views.
+  if (std::vector<CameraView> listed = views_from_scenes_json(path); !listed.empty()) s.views = std::move(listed);
   s.ensure_views();
   return s;
 }

@@ -1,6 +1,13 @@
 // The command line contract (DESIGN.md): list output, run -> CSV columns, bad input -> one-line
 // error and a non-zero exit, never a crash.
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <set>
+#include <thread>
 
 #include <cstdio>
 #include <fstream>
@@ -158,6 +165,113 @@ TEST(CLI, CompareTwoRuns) {
   EXPECT_NE(other.out.find("only in new"), std::string::npos) << other.out;
   const Result bad = travbench("compare " + a + " " + dir + "/missing.csv");
   EXPECT_NE(bad.code, 0);
+}
+
+std::vector<std::string> lines_of(const std::string& path) {
+  std::ifstream f(path);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(f, line);) lines.push_back(line);
+  return lines;
+}
+
+// The (workload, scheme) cells of a run CSV, each once: a duplicate fails the test.
+std::set<std::string> cells_of(const std::string& path) {
+  const std::vector<std::string> lines = lines_of(path);
+  std::set<std::string> cells;
+  if (lines.empty()) return cells;
+  std::vector<std::string> head;
+  std::stringstream hs(lines[0]);
+  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::stringstream rs(lines[i]);
+    std::string workload, scheme;
+    size_t c = 0;
+    for (std::string v; std::getline(rs, v, ','); ++c) {
+      if (c < head.size() && head[c] == "workload") workload = v;
+      if (c < head.size() && head[c] == "scheme") scheme = v;
+    }
+    EXPECT_TRUE(cells.insert(workload + "/" + scheme).second) << "duplicate row " << lines[i];
+  }
+  return cells;
+}
+
+// Starts travbench with `args` and SIGKILLs it as soon as `csv` holds a row; false when it ended
+// on its own first.
+bool killed_after_first_row(const std::string& args, const std::string& csv) {
+  const pid_t pid = fork();
+  if (pid < 0) return false;
+  if (pid == 0) {
+    const std::string cmd = "exec " + std::string(TRAVBENCH_BINARY) + " " + args + " >/dev/null 2>&1";
+    execl("/bin/sh", "sh", "-c", cmd.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  while (lines_of(csv).size() < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(60))
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  kill(pid, SIGKILL);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFSIGNALED(status);
+}
+
+// Issue 20, "sweeps that lose nothing": a run killed with SIGKILL after its first cells keeps
+// every finished cell (whole rows, header once), and --resume completes it with no duplicate
+// row and the cells an uninterrupted run has. Enough repetitions that the sweep is still running
+// when the first row appears; the kill then lands between or inside later cells.
+TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
+  const auto dir = test::temp_dir("cli_resume");
+  const std::string csv = (dir / "k.csv").string(), full = (dir / "full.csv").string();
+  const std::string sweep = "run --scene sphere --schemes bvh_single,mbvh8_single,kd_single --workloads "
+                            "primary,bounce:1,shadow --width 64 --height 64 --csv ";
+  ASSERT_TRUE(killed_after_first_row(sweep + csv + " --reps 20", csv)) << "the sweep ended before the kill";
+  const std::set<std::string> kept = cells_of(csv);
+  ASSERT_GE(kept.size(), 1u);
+  ASSERT_LT(kept.size(), 9u);
+  const std::string sidecar = (dir / "k.json").string();
+  ASSERT_TRUE(std::filesystem::exists(sidecar)) << "the sidecar is written first";
+  EXPECT_NE(lines_of(sidecar).size(), 0u);
+
+  // Other settings than the killed sweep's: refused, saying which.
+  const Result other = travbench(sweep + csv + " --reps 2 --resume");
+  EXPECT_EQ(other.code, 2) << other.out;
+  EXPECT_NE(other.out.find("reps"), std::string::npos) << other.out;
+  const Result resumed = travbench(sweep + csv + " --reps 20 --resume");
+  ASSERT_EQ(resumed.code, 0) << resumed.out;
+  EXPECT_NE(resumed.out.find("in the CSV already"), std::string::npos) << resumed.out;
+  ASSERT_EQ(travbench(sweep + full + " --reps 1").code, 0);
+  const std::set<std::string> done = cells_of(csv);
+  EXPECT_EQ(done, cells_of(full));
+  EXPECT_EQ(done.size(), 9u);
+  for (const auto& c : kept) EXPECT_TRUE(done.count(c)) << c;
+  const std::vector<std::string> lines = lines_of(csv);
+  for (size_t i = 1; i < lines.size(); ++i) EXPECT_NE(lines[i].rfind("scene,", 0), 0u) << "header written twice";
+  std::ifstream js(sidecar);
+  const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_NE(meta.find("\"complete\""), std::string::npos) << meta;
+  std::filesystem::remove_all(dir);
+}
+
+// A table streams its measured cells too: killed after the first, its CSV holds whole rows under
+// one header and the sidecar says the table did not finish.
+TEST(CLI, KilledTableKeepsItsCells) {
+  const auto dir = test::temp_dir("cli_table_kill");
+  const std::string csv = (dir / "b.csv").string();
+  ASSERT_TRUE(killed_after_first_row("table bounce --scene sphere --schemes bvh_single,mbvh8_single --width 64 "
+                                     "--height 64 --reps 20 --csv " + csv, csv))
+      << "the table ended before the kill";
+  const std::vector<std::string> lines = lines_of(csv);
+  ASSERT_GE(lines.size(), 2u);
+  EXPECT_LT(lines.size(), 9u);
+  auto fields = [](const std::string& line) { return std::count(line.begin(), line.end(), ',') + 1; };
+  for (size_t i = 1; i < lines.size(); ++i) EXPECT_EQ(fields(lines[i]), fields(lines[0])) << lines[i];
+  std::ifstream js(dir / "b.json");
+  const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_NE(meta.find("\"running\""), std::string::npos) << meta;
+  // A table that fails before it measures anything (a bad --param) leaves the CSV there as it was.
+  const Result bad = travbench("table bounce --scene sphere --param bogus=1 --csv " + csv);
+  EXPECT_EQ(bad.code, 2) << bad.out;
+  EXPECT_EQ(lines_of(csv), lines);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(CLI, BadInputGivesOneLineAndNonZeroExit) {

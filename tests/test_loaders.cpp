@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "structures/scene_loader.h"
+#include "workloads/workload.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -655,6 +656,70 @@ TEST_F(LoaderTest, GltfQuantizedAndBufferlessPositions) {
   for (int c = 0; c < 3; ++c) expect_near(corners(s, 2)[c], {0, 0, 0});
 }
 
+// Sparse accessors (glTF 2.0 §3.6.2.4): the base elements with some replaced, over a bufferView or
+// over zeros (no bufferView).
+TEST_F(LoaderTest, GltfSparseAccessors) {
+  Gltf g;
+  const int base = g.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
+  std::string idx, val;
+  put<uint16_t>(idx, 2);
+  for (float v : {7.f, 0.f, 0.f}) put(val, v);
+  const int iv = g.view(idx), vv = g.view(val);
+  g.j["accessors"][base]["sparse"] = {{"count", 1},
+                                      {"indices", {{"bufferView", iv}, {"componentType", 5123}}},
+                                      {"values", {{"bufferView", vv}}}};
+  std::string idx2, val2;
+  put<uint8_t>(idx2, 1);
+  put<uint8_t>(idx2, 2);
+  for (float v : {3.f, 0.f, 0.f, 4.f, 0.f, 0.f}) put(val2, v);
+  const int iv2 = g.view(idx2), vv2 = g.view(val2);
+  g.j["accessors"].push_back({{"componentType", 5126}, {"type", "VEC3"}, {"count", 3},
+                              {"sparse", {{"count", 2},
+                                          {"indices", {{"bufferView", iv2}, {"componentType", 5121}}},
+                                          {"values", {{"bufferView", vv2}}}}}});
+  const int zeros = static_cast<int>(g.j["accessors"].size()) - 1;
+  g.node({{"mesh", g.mesh({Gltf::prim(base), Gltf::prim(zeros)})}});
+  Scene s = tb::load_scene_file(write("sparse.gltf", g.gltf_text()));
+  EXPECT_EQ(triangles_by_x(s), (std::vector<X3>{{0, 1, 7}, {0, 3, 4}}));
+}
+
+// A glTF file's perspective cameras are its views (world matrices through the node hierarchy; the
+// camera looks down local -Z, +Y up), in depth-first node order; orthographic ones are left out;
+// a scenes.json entry for the file still wins.
+TEST_F(LoaderTest, GltfCamerasBecomeViews) {
+  Gltf g;
+  g.node({{"mesh", g.mesh({Gltf::prim(g.positions({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}))})}});
+  g.j["cameras"] = json::array({{{"type", "perspective"}, {"name", "front"}, {"perspective", {{"yfov", 0.8}, {"znear", 0.1}}}},
+                                {{"type", "perspective"}, {"perspective", {{"yfov", 1.2}, {"znear", 0.1}}}},
+                                {{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 9}}}}});
+  g.node({{"translation", {0, 0, 5}}, {"camera", 0}});
+  const double h = std::sqrt(0.5);  // child: 90 degrees about +Y, so local -Z looks down world -X
+  g.node({{"translation", {10, 0, 0}}, {"children", {3}}});
+  g.node({{"rotation", {0, h, 0, h}}, {"camera", 1}});
+  g.node({{"camera", 2}});
+  g.j["scenes"] = json::array({{{"nodes", {0, 1, 2, 4}}}});
+  const std::string path = write("cams/cameras.gltf", g.gltf_text());
+  Scene s = tb::load_scene_file(path);
+  ASSERT_EQ(s.views.size(), 2u);
+  EXPECT_EQ(s.views[0].name, "front");
+  expect_near(s.views[0].eye, {0, 0, 5});
+  expect_near(s.views[0].target, {0, 0, 4});
+  expect_near(s.views[0].up, {0, 1, 0});
+  EXPECT_NEAR(s.views[0].vfov_deg, 0.8 * 180 / M_PI, 1e-4);
+  expect_near(s.views[1].eye, {10, 0, 0});
+  expect_near(s.views[1].target, {9, 0, 0});
+  EXPECT_NEAR(s.views[1].vfov_deg, 1.2 * 180 / M_PI, 1e-4);
+  // --view 2 is the second camera: its primary rays start at its eye.
+  tb::WorkloadSpec spec = tb::parse_workload("primary");
+  spec.width = spec.height = 16;
+  spec.view = 1;
+  const tb::RayBatch b = tb::primary_rays(s, spec, 1.f);
+  expect_near(b.rays[0].org, {10, 0, 0});
+  EXPECT_LT(b.rays[0].dir.x, -0.5f);
+  write("cams/scenes.json", R"([{"file": "cameras.gltf", "views": [{"eye": [0, 0, 9], "target": [0, 0, 0]}]}])");
+  EXPECT_EQ(tb::load_scene_file(path).views.size(), 1u);
+}
+
 TEST_F(LoaderTest, GltfBadInput) {
   const std::string good = transformed_gltf().gltf_text();
   expect_input_error(write("trunc.gltf", good.substr(0, good.size() / 2)), "invalid glTF file");
@@ -711,12 +776,28 @@ TEST_F(LoaderTest, GltfBadInput) {
     g.node({{"mesh", g.mesh({Gltf::prim(p)})}});
     expect_input_error(write("nan.gltf", g.gltf_text()), "vertex 1 is NaN or Inf");
   }
-  {  // sparse accessor
+  {  // sparse accessors: an index past the accessor, values past their view, a signed index type
     json d = json::parse(good);
-    d["accessors"][0]["sparse"] = {{"count", 1},
+    // bufferView 1 holds the uint16 indices 0 1 2: sparse index 2 of a 3-element accessor is fine, of
+    // a 2-element one it is not.
+    d["accessors"][0]["count"] = 2;
+    d["accessors"][0]["sparse"] = {{"count", 3},
                                    {"indices", {{"bufferView", 1}, {"componentType", 5123}}},
                                    {"values", {{"bufferView", 0}}}};
-    expect_input_error(write("sparse.gltf", d.dump()), "sparse accessors are not supported");
+    expect_input_error(write("sparse_count.gltf", d.dump()), "sparse count 3 is not in 1..2");
+    d["accessors"][0]["sparse"]["count"] = 2;
+    d["accessors"][0]["sparse"]["indices"]["byteOffset"] = 2;  // indices 1 2
+    expect_input_error(write("sparse_index.gltf", d.dump()), "sparse index 2 is out of range");
+    d["accessors"][0]["sparse"]["indices"]["componentType"] = 5122;
+    expect_input_error(write("sparse_type.gltf", d.dump()), "sparse indices must be unsigned");
+    d["accessors"][0]["sparse"]["indices"] = {{"bufferView", 1}, {"componentType", 5123}};
+    d["accessors"][0]["sparse"]["values"]["byteOffset"] = 30;
+    expect_input_error(write("sparse_values.gltf", d.dump()), "sparse values");
+  }
+  {  // a camera node naming a camera that does not exist
+    json d = json::parse(good);
+    d["nodes"][2]["camera"] = 4;
+    expect_input_error(write("nocamera.gltf", d.dump()), "camera 4 does not exist");
   }
   {  // node cycle
     json d = json::parse(good);
@@ -736,6 +817,14 @@ TEST_F(LoaderTest, GltfBadInput) {
     d["extensionsRequired"] = {"KHR_draco_mesh_compression"};
     d["extensionsUsed"] = {"KHR_draco_mesh_compression"};
     expect_input_error(write("draco.gltf", d.dump()), "KHR_draco_mesh_compression");
+    // Used but not required, on a primitive with no uncompressed fallback: still refused by name.
+    json e = json::parse(good);
+    e["extensionsUsed"] = {"KHR_draco_mesh_compression"};
+    json draco = {{"bufferView", 0}, {"attributes", {{"POSITION", 0}}}};
+    json prim = {{"attributes", json::object()}};
+    prim["extensions"]["KHR_draco_mesh_compression"] = draco;
+    e["meshes"][0]["primitives"][0] = prim;
+    expect_input_error(write("draco_prim.gltf", e.dump()), "Draco-compressed");
   }
   {  // only points: nothing to trace
     Gltf g;

@@ -38,6 +38,10 @@ struct RayBatch {
   bool common_origin = false;  // every ray starts at one point (primary, divergence:D, rnd)
   uint32_t depth = 0;          // 0 = primary, k = k-th bounce (for statistics by depth)
   std::string workload;
+  // Camera workloads (primary, divergence, bounce, shadow): the pixel y * width + x whose path each
+  // ray continues, so per-ray costs map back to the image (`travbench image`); empty otherwise
+  // (random rays, hard cases, ray files).
+  std::vector<uint32_t> pixel;
 
   size_t size() const { return rays.size(); }
   uint32_t num_packets() const { return uint32_t(packet_begin.size() - 1); }

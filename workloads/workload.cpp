@@ -192,6 +192,7 @@ RayBatch path_rays(const Scene& scene, const WorkloadSpec& spec, const ClosestHi
         r.dir = cosine_hemisphere(n, rng);
       }
       next.rays.push_back(r);
+      next.pixel.push_back(cur.pixel[i]);
       next_packet.push_back(packet_of[i]);
     }
     regroup(next, next_packet);
@@ -225,6 +226,7 @@ RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float diverg
         r.org = cam.eye;
         r.dir = cam.direction(cx + divergence * (x + 0.5f - cx), cy + divergence * (y + 0.5f - cy));
         b.rays.push_back(r);
+        b.pixel.push_back(y * spec.width + x);
       }
       b.packet_begin.push_back(uint32_t(b.rays.size()));
     }

@@ -1,0 +1,165 @@
+#include "harness/sweep.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+
+#include "harness/compare.h"  // read_csv
+#include "harness/experiment.h"
+#include "structures/scene.h"  // InputError
+
+namespace tb {
+
+std::string cell_key(const std::string& workload, const std::string& scheme, const std::string& kernel,
+                     const std::string& view, const std::string& params) {
+  return workload + "|" + scheme + "|" + kernel + "|" + view + "|" + params;
+}
+
+std::string cell_key(const Record& r) {
+  auto f = [&](const char* k) { const std::string* v = r.get(k); return v ? *v : std::string(); };
+  return cell_key(f("workload"), f("scheme"), f("kernel"), f("view"), f("params"));
+}
+
+namespace {
+
+void write_all(int fd, const std::string& text, const std::string& path) {
+  for (size_t off = 0; off < text.size();) {
+    const ssize_t n = ::write(fd, text.data() + off, text.size() - off);
+    if (n <= 0) throw InputError(path + ": write failed (" + std::strerror(errno) + ")");
+    off += size_t(n);
+  }
+  if (::fsync(fd) != 0) throw InputError(path + ": fsync failed (" + std::strerror(errno) + ")");
+}
+
+// Drops a torn last line (a kill inside write(2)): the file then ends at a row boundary.
+void cut_torn_line(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  if (text.empty() || text.back() == '\n') return;
+  const size_t keep = text.rfind('\n') == std::string::npos ? 0 : text.rfind('\n') + 1;
+  std::filesystem::resize_file(path, keep);
+}
+
+std::string shown(const nlohmann::json& j) { return j.is_null() ? "(none)" : j.dump(); }
+
+}  // namespace
+
+CellStream::CellStream(std::string path, nlohmann::json meta, bool resume, const std::vector<std::string>& must_match)
+    : path_(std::move(path)), meta_(provenance()) {
+  meta_.update(meta);
+  std::error_code ec;
+  if (resume && std::filesystem::exists(path_, ec)) {
+    nlohmann::json old;
+    {
+      std::ifstream js(sidecar_path(path_));
+      if (!js) throw InputError("--resume: " + sidecar_path(path_) + " is missing, so the cells of " + path_ +
+                                " cannot be shown to belong to this sweep; remove the CSV or drop --resume");
+      try {
+        js >> old;
+      } catch (const std::exception&) {
+        throw InputError("--resume: " + sidecar_path(path_) + " is not valid JSON");
+      }
+    }
+    for (const auto& k : must_match) {
+      const nlohmann::json a = old.contains(k) ? old[k] : nlohmann::json(), b = meta_.contains(k) ? meta_[k] : nlohmann::json();
+      if (a != b)
+        throw InputError("--resume: " + path_ + " was written with " + k + " " + shown(a) + ", this sweep has " +
+                         shown(b) + "; its cells would not be comparable (remove the CSV or drop --resume)");
+    }
+    cut_torn_line(path_);
+    if (std::filesystem::file_size(path_) > 0) {
+      const CsvTable t = read_csv(path_);
+      cols_ = t.header;
+      for (const auto& row : t.rows) {
+        Record r;
+        for (size_t c = 0; c < cols_.size(); ++c) r.set(cols_[c], row[c]);
+        keys_.insert(cell_key(r));
+        records_.push_back(std::move(r));
+      }
+      resumed_ = records_.size();
+    }
+  }
+  empty_file_ = cols_.empty();
+}
+
+// On the first row (or at the end of a sweep without any): a sweep that fails before it measures
+// anything (a bad --param a table checks, a scheme that cannot be built) leaves an older CSV of the
+// same name as it was.
+void CellStream::open() {
+  if (fd_ >= 0) return;
+  fd_ = ::open(path_.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (empty_file_ ? O_TRUNC : O_APPEND), 0644);
+  if (fd_ < 0) throw InputError(path_ + ": cannot open for writing (" + std::strerror(errno) + ")");
+  meta_["status"] = "running";
+  write_sidecar(path_, meta_);
+}
+
+CellStream::~CellStream() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void CellStream::rewrite() {
+  std::string text = csv_line(cols_, nullptr);
+  for (const auto& r : records_) text += csv_line(cols_, &r);
+  write_file_durably(path_, text);
+  empty_file_ = false;
+  ::close(fd_);
+  fd_ = ::open(path_.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
+  if (fd_ < 0) throw InputError(path_ + ": cannot reopen (" + std::strerror(errno) + ")");
+}
+
+void CellStream::append(const Record& r) {
+  open();
+  records_.push_back(r);
+  keys_.insert(cell_key(r));
+  bool new_column = false;
+  for (const auto& f : r.fields())
+    if (std::find(cols_.begin(), cols_.end(), f.first) == cols_.end()) cols_.push_back(f.first), new_column = true;
+  if (new_column && !empty_file_) return rewrite();
+  // The header goes with the first row of a fresh file; a resumed file already has one.
+  write_all(fd_, (empty_file_ ? csv_line(cols_, nullptr) : std::string()) + csv_line(cols_, &r), path_);
+  empty_file_ = false;
+}
+
+void CellStream::finish(const nlohmann::json& extra) {
+  open();
+  meta_.update(extra);
+  meta_["status"] = "complete";
+  meta_["rows"] = records_.size();
+  meta_["resumed_rows"] = resumed_;
+  write_sidecar(path_, meta_);
+}
+
+std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& scene_arg, const std::string& csv,
+                              bool resume) {
+  const nlohmann::json meta = {{"command", "run"},
+                               {"scene", scene_arg},
+                               {"scene_hash", bench.scene().content_hash()},
+                               {"seed", opt.seed},
+                               {"width", opt.width},
+                               {"height", opt.height},
+                               {"view", opt.view + 1},
+                               {"reps", opt.reps},
+                               {"threads", opt.threads},
+                               {"kernel", std::string(kernel_name(opt.scheme_config.kernel))},
+                               {"params", opt.scheme_config.params},
+                               {"stats", opt.stats},
+                               {"cache", opt.cache ? opt.cache_config + " " + opt.cache_policy : ""}};
+  // Schemes and workloads may differ: a resume may finish a sweep or extend it by more cells.
+  CellStream stream(csv, meta, resume,
+                    {"command", "scene_hash", "git_revision", "seed", "width", "height", "view", "reps", "threads",
+                     "kernel", "params", "stats", "cache"});
+  if (stream.resumed())
+    std::fprintf(stderr, "%s: resuming, %zu cells there already\n", csv.c_str(), stream.resumed());
+  opt.cells = &stream;
+  std::vector<Record> records = run_experiment(bench, opt);
+  stream.finish();
+  return records;
+}
+
+}  // namespace tb
