@@ -70,12 +70,16 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
     if (next >= end) return;
     const uint32_t flight = std::min(flight_, end - next);
     const size_t cap = size_t(7) * m.stats.max_depth + 10;  // mbvh_traverse's bound for N = 8
-    // The waiting rays' state; stacks uninitialised (only the used part is ever touched).
-    struct Slot {
+    // The waiting rays' state, one cache line per ray: a copy of the ray (a resumed ray reads no
+    // second line from the batch), where it resumes, its index and closest hit. Stacks apart,
+    // uninitialised (only the used part is ever touched).
+    struct alignas(64) Slot {
+      Ray r;
       MBVHCursor at;
       uint32_t ray;
       Hit hit;
     };
+    static_assert(sizeof(Slot) == 64);
     std::vector<Slot> slots(flight);
     std::unique_ptr<MBVHStackEntry[]> stacks(new MBVHStackEntry[flight * cap]);
     std::vector<std::vector<uint32_t>> queues(tl.count());
@@ -101,7 +105,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
         if (probe.counts) probe.counts->rays++;
         ++st_rays;
       }
-      slots[slot] = {{0, 0}, i, initial_hit(ray)};
+      slots[slot] = {ray, {0, 0}, i, initial_hit(ray)};
       probe.write(&slots[slot], sizeof(Slot));
       enqueue(slot, tl.of(0));
     };
@@ -119,8 +123,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
         probe.read(&slot, sizeof(uint32_t));
         Slot& s = slots[slot];
         probe.read(&s, sizeof(Slot));
-        const Ray& ray = batch.rays[s.ray];
-        probe.read(&ray, sizeof(Ray));
+        const Ray& ray = s.r;
         const RayCtx rc(ray);
         const bool done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
             m, nullptr, NodeRay<8>(rc, ray.tmin), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
