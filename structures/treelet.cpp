@@ -55,7 +55,7 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
     }
   };
   if (m.nodes.empty()) return t;
-  // Subtree bytes, children before parents (a depth-first order reversed).
+  // Subtree bytes, children before parents (a breadth-first order, reversed).
   std::vector<uint32_t> order{0};
   for (size_t i = 0; i < order.size(); ++i) {
     const auto& nd = m.nodes[order[i]];
