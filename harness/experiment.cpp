@@ -109,13 +109,18 @@ Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& b
     Probe probe;
     probe.counts = &c;
     enable_ftz_daz();
+    scheme.take_stat_columns();  // drops what earlier instrumented traces (--cache of another cell) gathered
     scheme.trace(batch, PacketRange::all(batch), hits, probe);
     const double n = std::max<double>(1, double(batch.size()));
     r.set("nodes_per_ray", double(c.node_ray_visits) / n)
         .set("leaves_per_ray", double(c.leaf_ray_visits) / n)
         .set("tris_per_ray", double(c.tri_tests) / n)
         .set("rays_per_node", c.node_visits ? double(c.node_ray_visits) / double(c.node_visits) : 0.0)
-        .set("rays_per_leaf", c.leaf_visits ? double(c.leaf_ray_visits) / double(c.leaf_visits) : 0.0);
+        .set("rays_per_leaf", c.leaf_visits ? double(c.leaf_ray_visits) / double(c.leaf_visits) : 0.0)
+        .set("bytes_per_node", c.node_visits ? double(c.node_bytes) / double(c.node_visits) : 0.0);
+    const StructureBytes b = scheme.memory();
+    r.set("node_bytes", uint64_t(b.nodes)).set("prim_bytes", uint64_t(b.prims));
+    for (const StatColumn& s : scheme.take_stat_columns()) r.set(s.name, s.value);
   }
   if (opt.cache) add_cache_columns(r, scheme, batch, hits, opt.cache_config, opt.cache_policy);
   // Every repetition's Mrays/s in run order, for `travbench compare`'s Mann-Whitney U test, and

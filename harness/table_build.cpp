@@ -114,7 +114,7 @@ int build_table(const TableOptions& opt) {
     Record r;
     r.set("structure", qn).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
     r.set("threads", 1).set("build_ms", ms.wall_ms).set("build_cpu_ms", ms.cpu_ms);
-    r.set("bytes", uint64_t(built.back()->bytes()));
+    r.set("bytes", uint64_t(built.back()->bytes().total()));
     std::fprintf(stderr, "%-14s %s: %.1f ms\n", qn, scene.name.c_str(), ms.wall_ms);
     records.push_back(std::move(r));
   }

@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 SCHEME_ORDER = [
     "bvh_single", "mbvh4_single", "mbvh8_single", "kd_single", "kd_packet", "bvh_masked", "bvh_ranged",
-    "bvh_partition", "mbvh_rs", "raygrid", "embree_single", "embree_packet8", "embree_stream", "reference",
+    "bvh_partition", "mbvh_rs", "raygrid", "cwbvh_single", "treelet_queue", "embree_single", "embree_packet8", "embree_stream", "reference",
 ]
 _palette = plt.get_cmap("tab20").colors
 
@@ -301,6 +301,22 @@ def plot_scaling(path):
     finish(fig, ax, path.with_suffix(".png"), "scaling: bounce:2 on spheres:N (1 thread)", "Mrays/s")
 
 
+def plot_bandwidth(path):
+    """table bandwidth (issue 19): bytes per node fetch, memory reads per ray, speed; per workload."""
+    rows = read(path)
+    workloads = list(dict.fromkeys(r["workload"] for r in rows))
+    schemes = ordered(r["scheme"] for r in rows)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    panels = [("bytes_per_node", "bytes per node fetch"), ("mem_reads_per_ray", "simulated memory reads per ray (64 B lines)"),
+              ("mrays_median", "Mrays/s (1 thread, median)")]
+    for ax, (key, label) in zip(axes, panels):
+        grouped_bars(ax, rows, "workload", workloads, schemes, key)
+        ax.set_ylabel(label)
+        ax.grid(axis="y", alpha=0.3)
+    scene = rows[0]["scene"] if rows else ""
+    finish(fig, axes[0], path.with_suffix(".png"), f"{scene}: node bytes, memory reads, speed", "bytes per node fetch")
+
+
 def plot_build(path):
     rows = read(path)
     labels = [f'{r["structure"]} {r.get("triangles", "")} tris, {r.get("threads", "1")} thr' for r in rows]
@@ -370,6 +386,7 @@ PLOTTERS = {
     "cache": plot_cache,
     "scaling": plot_scaling,
     "build": plot_build,
+    "bandwidth": plot_bandwidth,
 }
 
 

@@ -134,12 +134,12 @@ struct MBVHData {
   std::shared_ptr<const MBVH<N, W>> mbvh;
   std::shared_ptr<const TriangleSet> tris;  // null for the watertight kernel (it reads the blocks)
 };
-// Nodes + triangle blocks (+ the scalar kernels' triangle set when one is used).
+// The triangle bytes a traversal reads: blocks (+ the scalar kernels' triangle set when one is used).
 template <int N, int W>
-size_t mbvh_bytes(const MBVHData<N, W>& d, TriKernel k) {
-  return d.mbvh->stats.node_bytes + d.mbvh->stats.tri_bytes +
-         (d.tris ? d.tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t)) : 0);
+size_t mbvh_prim_bytes(const MBVHData<N, W>& d, TriKernel k) {
+  return d.mbvh->stats.tri_bytes + (d.tris ? d.tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t)) : 0);
 }
+
 // mbvh_params and fetch_mbvh (a scheme's config -> MBVHBuildParams; the cached MBVH) live in
 // traversal/mbvh_fetch.h.
 

@@ -292,8 +292,9 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
   OctreeStats& s = o.stats;
   s.nodes = uint32_t(o.nodes.size());
   s.triangles = n;
-  s.bytes = o.nodes.size() * sizeof(OctreeNode) + o.leaves.size() * sizeof(OctreeLeaf) +
-            o.mini.stats.node_bytes + o.mini.stats.tri_bytes + o.mini8.stats.node_bytes + o.mini8.stats.tri_bytes;
+  s.tri_bytes = o.mini.stats.tri_bytes + o.mini8.stats.tri_bytes;
+  s.bytes = o.nodes.size() * sizeof(OctreeNode) + o.leaves.size() * sizeof(OctreeLeaf) + o.mini.stats.node_bytes +
+            o.mini8.stats.node_bytes + s.tri_bytes;
   s.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return o;
 }

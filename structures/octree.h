@@ -99,6 +99,7 @@ struct OctreeStats {
   double avg_mbvh_leaf_depth = 0;    // depth of mini-MBVH leaves (root = 1), over all of them
   double build_ms = 0;
   size_t bytes = 0;                  // octree nodes + leaves + mini-MBVH nodes + triangle blocks
+  size_t tri_bytes = 0;              // of which the mini-MBVHs' triangle blocks
   std::string describe() const;
 };
 

@@ -16,7 +16,7 @@
 namespace tb {
 namespace {
 
-constexpr MBVHDefaults kDefaults{4, 16, true, 0};
+constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // compresses mbvh8_single's cached tree
 
 // Per-ray constants of the decoded box test: as NodeRay<8>, with the near/far choice per axis
 // expressed as which quantized array holds the near planes.
@@ -105,7 +105,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
     cw_ = cache.get<CWBVH>(params_.key(8, 8), [&] { return CWBVH::compress(*m.mbvh); });
   }
   std::string structure_info() const override { return cw_->stats.describe(); }
-  size_t structure_bytes() const override { return cw_->stats.node_bytes + cw_->stats.tri_bytes; }
+  StructureBytes memory() const override { return {cw_->stats.node_bytes, cw_->stats.tri_bytes}; }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {

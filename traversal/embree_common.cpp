@@ -59,8 +59,10 @@ EmbreeScene::EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust)
   rtcCommitGeometry(geom);
   rtcAttachGeometry(scene_, geom);
   rtcReleaseGeometry(geom);
+  const int64_t buffers = g_device_bytes.load();
   rtcCommitScene(scene_);
-  bytes_ = size_t(std::max<int64_t>(0, g_device_bytes.load() - before));
+  bytes_.prims = size_t(std::max<int64_t>(0, buffers - before));
+  bytes_.nodes = size_t(std::max<int64_t>(0, g_device_bytes.load() - buffers));
 }
 
 EmbreeScene::~EmbreeScene() {

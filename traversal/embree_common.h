@@ -23,12 +23,14 @@ class EmbreeScene {
   EmbreeScene(const EmbreeScene&) = delete;
   ~EmbreeScene();
   RTCScene get() const { return scene_; }
-  // Device memory the scene added (buffers + BVH), from Embree's memory monitor.
-  size_t bytes() const { return bytes_; }
+  // Device memory the scene added, from Embree's memory monitor: `prims` what the geometry's
+  // vertex and index buffers took, `nodes` what rtcCommitScene allocated — the BVH with Embree's
+  // own leaf primitives (triangle4v/4i copies), which the monitor cannot tell apart.
+  StructureBytes bytes() const { return bytes_; }
 
  private:
   RTCScene scene_ = nullptr;
-  size_t bytes_ = 0;
+  StructureBytes bytes_;
 };
 
 RTCDevice embree_device();
@@ -63,7 +65,7 @@ class EmbreeScheme : public TraverserBase<Derived> {
   void prepare(const Scene& scene, StructureCache& cache) override {
     scene_ = fetch_embree_scene(scene, cache, quality_, robust_);
   }
-  size_t structure_bytes() const override { return scene_ ? scene_->bytes() : 0; }
+  StructureBytes memory() const override { return scene_ ? scene_->bytes() : StructureBytes{}; }
 
  protected:
   // An intersect context flagged coherent for common-origin (primary) batches, incoherent otherwise.

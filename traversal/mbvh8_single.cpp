@@ -19,11 +19,7 @@
 namespace tb {
 namespace {
 
-// SAH collapse, leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0):
-// one leaf path instead of a branch between 4- and 8-wide blocks that mispredicts; +3 to +8% on
-// bunny, dragon, buddha and lucy (bounce:2), within noise on the architectural scenes, for ~15%
-// more triangle bytes.
-constexpr MBVHDefaults kDefaults{4, 16, true, 0};
+constexpr MBVHDefaults kDefaults = kMBVH8Defaults;
 
 class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHData<8, 8>> {
  public:

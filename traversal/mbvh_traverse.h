@@ -346,19 +346,37 @@ inline uint32_t min_key8(__m256i k) {
 //    keys of thesis Alg. 2.10.
 enum class ChildOrder { branching, sort_always };
 
+// Where a suspended traversal resumes: the reference it visits next and its pending-stack depth.
+struct MBVHCursor {
+  uint32_t cur = 0, sp = 0;
+};
+// The suspension test of a traversal that never suspends (compiles away).
+struct NeverLeave {
+  constexpr bool operator()(uint32_t) const { return false; }
+};
+
 // Ordered single-ray traversal (thesis Alg. 2.8 with front-to-back order): the N children are
 // tested at once, the entered ones ordered as `O` says; the nearest is entered and the others are
-// pushed far-to-near with their entry distances. Starts at `start` (the root, or a subtree when
-// mbvh_rs falls back to one ray); `stack` must hold (N-1)*max_depth+1 entries (at depth d at most
-// (N-1)*(d-1) are pending, so push_sorted's N-entry store stays inside).
-template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
-inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
-                          const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
+// pushed far-to-near with their entry distances. Runs from `at` (the root or a subtree with an
+// empty stack when it starts; mbvh_rs falls back to one ray at a subtree); `stack` must hold
+// (N-1)*max_depth+1 entries (at depth d at most (N-1)*(d-1) are pending, so push_sorted's N-entry
+// store stays inside). Before each visit `leave(ref)` may suspend the ray: `at` then holds the
+// reference it was about to visit and its stack depth, and the call returns false; resumed with
+// the same `at`, stack and hit it visits exactly what an unsuspended traversal would
+// (treelet_queue suspends at treelet boundaries; everyone else passes NeverLeave). True: done.
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P, class Leave>
+[[gnu::always_inline]] inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr,
+                                                      const TriRay<W>& tr, const RayCtx* rc, MBVHCursor& at, Hit& hit,
+                                                      MBVHStackEntry* stack, P& probe, Leave&& leave) {
   using S = simd::V<N>;
   const MBVHNode<N>* nodes = m.nodes.data();
-  uint32_t sp = 0, cur = start;
+  uint32_t sp = at.sp, cur = at.cur;
   float tfar = hit.t;  // a register copy: stack stores could alias hit.t and force reloads
   for (;;) {
+    if (leave(cur)) {
+      at = {cur, sp};
+      return false;
+    }
     if (!mbvh_ref::is_leaf(cur)) {
       const MBVHNode<N>& nd = nodes[cur];
       probe.node(&nd, sizeof(nd));
@@ -410,8 +428,14 @@ inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const Node
       leaf_test<N, W, K>(m, ts, tr, rc, cur, hit);
       tfar = hit.t;
     }
-    if (!pop_pending(stack, sp, tfar, cur, probe)) return;
+    if (!pop_pending(stack, sp, tfar, cur, probe)) return true;
   }
+}
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
+inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
+                          const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
+  MBVHCursor at{start, 0};
+  mbvh_traverse_from<N, W, K, O>(m, ts, nr, tr, rc, at, hit, stack, probe, NeverLeave{});
 }
 
 // Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.

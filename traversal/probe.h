@@ -14,8 +14,9 @@ struct TraversalCounts {
   uint64_t leaf_visits = 0;
   uint64_t leaf_ray_visits = 0;
   uint64_t tri_tests = 0;        // ray-triangle tests (per ray-triangle pair)
+  uint64_t node_bytes = 0;       // bytes the interior node visits read (a visit reads its node once)
   void add(const TraversalCounts& o) {
-    rays += o.rays; node_visits += o.node_visits; node_ray_visits += o.node_ray_visits;
+    rays += o.rays; node_visits += o.node_visits; node_ray_visits += o.node_ray_visits; node_bytes += o.node_bytes;
     leaf_visits += o.leaf_visits; leaf_ray_visits += o.leaf_ray_visits; tri_tests += o.tri_tests;
   }
 };
@@ -38,7 +39,7 @@ class Probe {
 
   // An interior node of `bytes` bytes at `p` visited by `active` rays at once.
   void node(const void* p, uint32_t bytes, uint32_t active = 1) {
-    if (counts) { counts->node_visits++; counts->node_ray_visits += active; }
+    if (counts) { counts->node_visits++; counts->node_ray_visits += active; counts->node_bytes += bytes; }
     if (cache) read(p, bytes);
   }
   void leaf(const void* p, uint32_t bytes, uint32_t active = 1) {

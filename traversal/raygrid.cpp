@@ -186,9 +186,10 @@ class RayGrid final : public TraverserBase<RayGrid> {
   // Queues fill from the rays of one call: fewer than a few dozen full queues per call and RayGrid
   // degrades to per-leaf single-ray work (2 threads on 16-packet chunks scaled only 1.6x).
   uint32_t preferred_chunk_rays() const override { return 65536; }
-  size_t structure_bytes() const override {
-    if (!oct_) return 0;
-    return oct_->stats.bytes + (tris_ ? tris_->size() * (TriangleSet::bytes(cfg_.kernel) + sizeof(uint32_t)) : 0);
+  StructureBytes memory() const override {
+    if (!oct_) return {};
+    return {oct_->stats.bytes - oct_->stats.tri_bytes,
+            oct_->stats.tri_bytes + (tris_ ? tris_->size() * (TriangleSet::bytes(cfg_.kernel) + sizeof(uint32_t)) : 0)};
   }
 
   template <class P>

@@ -17,6 +17,13 @@ class Reference final : public TraverserBase<Reference> {
   explicit Reference(const SchemeConfig&) {}
   std::string_view name() const override { return "reference"; }
   void prepare(const Scene& scene, StructureCache& cache) override { oracle_.emplace(scene, cache); }
+  // The culling BVH, and the scene's vertex and index arrays the exact test reads.
+  StructureBytes memory() const override {
+    if (!oracle_) return {};
+    const Scene& s = oracle_->scene();
+    return {oracle_->bvh().stats.bytes,
+            s.positions.size() * sizeof(s.positions[0]) + s.triangles.size() * sizeof(s.triangles[0])};
+  }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {

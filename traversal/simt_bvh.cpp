@@ -18,8 +18,8 @@ class SimtBVH final : public TraverserBase<SimtBVH> {
     data_ = fetch_gpu_bvh(scene, cache, params_, cfg_.kernel);
   }
   std::string structure_info() const override { return data_.gpu->describe(); }
-  size_t structure_bytes() const override {
-    return data_.gpu->bytes() + data_.bvh.tris->size() * (TriangleSet::bytes(cfg_.kernel) + sizeof(uint32_t));
+  StructureBytes memory() const override {
+    return {data_.gpu->bytes(), data_.bvh.tris->size() * (TriangleSet::bytes(cfg_.kernel) + sizeof(uint32_t))};
   }
 
   template <class P>

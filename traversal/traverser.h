@@ -12,6 +12,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "structures/scene.h"
 #include "structures/structure_cache.h"
@@ -45,6 +46,20 @@ struct SchemeConfig {
   const std::string* value(const std::string& key) const;
 };
 
+// Bytes of a scheme's structure, split as a traversal reads them (`run --stats` columns node_bytes
+// and prim_bytes): `nodes` the tree (interior nodes, leaf records and reference lists), `prims`
+// the triangle data its leaves test (leaf-ordered triangle sets, SIMD triangle blocks).
+struct StructureBytes {
+  size_t nodes = 0, prims = 0;
+  size_t total() const { return nodes + prims; }
+};
+
+// A named statistic a scheme adds to `run --stats` rows (treelet_queue's queue statistics).
+struct StatColumn {
+  std::string name;
+  double value;
+};
+
 class Traverser {
  public:
   virtual ~Traverser() = default;
@@ -59,7 +74,11 @@ class Traverser {
   // One line describing the built structure (nodes, bytes, ...), for logs and the build table.
   virtual std::string structure_info() const { return {}; }
   // Bytes of the scheme's acceleration structure and triangle data (Embree: from its memory monitor).
-  virtual size_t structure_bytes() const { return 0; }
+  virtual StructureBytes memory() const { return {}; }
+  size_t structure_bytes() const { return memory().total(); }
+  // Scheme-specific statistics gathered by the instrumented traces since the last call (which
+  // resets them); `run --stats` appends them to the row. Most schemes have none.
+  virtual std::vector<StatColumn> take_stat_columns() const { return {}; }
   // Rays per trace() call below which the scheme loses efficiency (batch schemes that queue rays
   // by region need many rays per call); multi-threaded runs hand out chunks of at least this size
   // while keeping every thread busy. 0: any chunk size is fine.

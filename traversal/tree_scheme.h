@@ -30,9 +30,9 @@ struct TreeData {
   std::shared_ptr<const Tree> tree;
   std::shared_ptr<const TriangleSet> tris;  // one entry per leaf reference, in leaf order
   // Bytes of the nodes plus the leaf-ordered triangles in kernel k's layout (what a traversal
-  // reads; as mbvh_bytes counts the MBVH schemes).
-  size_t bytes(TriKernel k) const {
-    return tree->stats.bytes + tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t));
+  // reads; as MBVHChoice::bytes counts the MBVH schemes).
+  StructureBytes bytes(TriKernel k) const {
+    return {tree->stats.bytes, tris->size() * (TriangleSet::bytes(k) + sizeof(uint32_t))};
   }
 };
 
@@ -56,7 +56,7 @@ class TreeScheme : public TraverserBase<Derived> {
     data_ = fetch_tree<Tree>(scene, cache, params_, cfg_.kernel);
   }
   std::string structure_info() const override { return data_.tree->stats.describe(); }
-  size_t structure_bytes() const override { return data_.bytes(cfg_.kernel); }
+  StructureBytes memory() const override { return data_.bytes(cfg_.kernel); }
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     dispatch_kernel(cfg_.kernel, [&](auto k) {

@@ -1,0 +1,98 @@
+// treelet_queue (issue 19): the treelet partition of the MBVH8 (structures/treelet.h) and the
+// queued traversal, which must return exactly mbvh8_single's hits: it runs the same loop and
+// kernels on the same tree and only suspends a ray between two visits.
+#include <cstring>
+
+#include "structures/treelet.h"
+#include "test_util.h"
+#include "traversal/mbvh_fetch.h"
+#include "workloads/hard_cases.h"
+
+namespace tb {
+namespace {
+
+// Every node and block belongs to a treelet; a leaf's blocks follow their parent; the budget holds
+// unless the treelet is a single node; the bytes add up to the tree's; small subtrees are packed
+// (a treelet per node or two is what the plain greedy cut gave on 8-wide nodes).
+TEST(Treelets, PartitionCoversTheTreeWithinBudget) {
+  Bench& bench = test::bench_for("stadium");
+  const auto m = fetch_mbvh<8, 8>(bench.scene(), bench.cache(), mbvh_params(resolve_config("mbvh8_single", {}), kMBVH8Defaults),
+                                  TriKernel::watertight);
+  for (size_t budget : {size_t(2048), size_t(32768), size_t(262144)}) {
+    const Treelets t = Treelets::partition(*m.mbvh, budget);
+    ASSERT_GT(t.count(), 0u);
+    if (budget == 2048) {
+      EXPECT_GT(t.count(), 10u);
+    }
+    std::vector<uint32_t> nodes(t.count(), 0);
+    for (uint32_t n = 0; n < m.mbvh->nodes.size(); ++n) {
+      ASSERT_LT(t.node_treelet[n], t.count());
+      nodes[t.node_treelet[n]]++;
+      const auto& nd = m.mbvh->nodes[n];
+      for (uint32_t c = 0; c < nd.num_children; ++c) {
+        if (mbvh_ref::is_leaf(nd.ref[c])) {
+          EXPECT_EQ(t.of(nd.ref[c]), t.node_treelet[n]);
+        }
+      }
+    }
+    for (uint32_t b : t.block_treelet) EXPECT_LT(b, t.count());
+    size_t sum = 0;
+    for (size_t b : t.bytes) sum += b;
+    EXPECT_EQ(sum, m.mbvh->stats.node_bytes + m.mbvh->stats.tri_bytes);
+    if (budget >= 32768) {
+      EXPECT_LT(t.count() * 4, m.mbvh->nodes.size()) << budget;
+    }
+    for (uint32_t i = 0; i < t.count(); ++i)
+      if (nodes[i] > 1) {
+        EXPECT_LE(t.bytes[i], budget) << i;
+      }
+  }
+}
+
+// Bit-identical hits to mbvh8_single on ordinary and hard workloads, with the default (L2) budget
+// and a tiny one that makes rays cross treelet boundaries many times, and a ray pool smaller than
+// the batch (slots are reused).
+TEST(TreeletQueue, HitsAreBitIdenticalToMBVH8Single) {
+  for (const std::string scene : {"room", "sphere@148376,1234,-223423"}) {
+    Bench& bench = test::bench_for(scene);
+    auto ref = make_scheme("mbvh8_single");
+    ref->prepare(bench.scene(), bench.cache());
+    std::vector<std::string> workloads = {"primary", "bounce:2", "shadow"};
+    for (const auto& h : hard_case_names()) workloads.push_back(h);
+    for (const char* budget : {"262144", "2048"}) {
+      SchemeConfig cfg;
+      cfg.params = {{"treelet_bytes", budget}, {"rays_in_flight", "500"}};
+      auto t = make_scheme("treelet_queue", cfg);
+      t->prepare(bench.scene(), bench.cache());
+      for (const auto& w : workloads) {
+        const RayBatch& b = bench.rays(test::small_spec(w, 48));
+        std::vector<Hit> a(b.size()), q(b.size());
+        trace_batch(*ref, b, a, 1);
+        trace_batch(*t, b, q, 2);
+        size_t differ = 0;
+        for (size_t i = 0; i < b.size(); ++i) differ += std::memcmp(&a[i], &q[i], sizeof(Hit)) != 0;
+        EXPECT_EQ(differ, 0u) << scene << " / " << w << " treelet_bytes=" << budget;
+      }
+    }
+  }
+}
+
+// --stats: rays move between queues (a small budget cuts the tree into many treelets), several
+// rays share a treelet visit, and the instrumented path gives the same hits as the timed one.
+TEST(TreeletQueue, StatsShowQueuedRaysAndSwitches) {
+  Bench& bench = test::bench_for("stadium");
+  RunOptions opt;
+  opt.reps = 1, opt.stats = true, opt.progress = false, opt.width = opt.height = 48;
+  opt.workloads = {"bounce:2"};
+  opt.schemes = {"treelet_queue"};
+  opt.scheme_config.params = {{"treelet_bytes", "4096"}};
+  const auto rows = run_experiment(bench, opt);
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_GT(std::stod(*rows[0].get("treelet_switches_per_ray")), 0.5);
+  EXPECT_GT(std::stod(*rows[0].get("treelet_rays_per_visit")), 1.0);
+  EXPECT_GT(std::stod(*rows[0].get("treelets")), 10.0);
+  EXPECT_EQ(*rows[0].get("false_miss"), "0");
+}
+
+}  // namespace
+}  // namespace tb
