@@ -222,18 +222,20 @@ def divergence(R):
           "Ours: `bvh_ranged` rows of `results/<scene>/divergence.csv`; the resolution and angle each CSV ran at "
           "are in its columns (`deg_per_ray`, absent in CSVs made before the calibration) and sidecar.\n")
     t = ref("table02-04_packet_divergence_cpu.csv")
-    for s in scenes_with("divergence"):
-        rows = [r for r in ours(s, "divergence") if r["scheme"] == "bvh_ranged" and r["divergence"].isdigit()]
+    # divergence.csv as run.sh makes it; divergence_thesis.csv where a calibrated run was kept beside an
+    # older uncalibrated one (results/README.md).
+    for s, stem in sorted((s, st) for st in ("divergence", "divergence_thesis") for s in scenes_with(st)):
+        rows = [r for r in ours(s, stem) if r["scheme"] == "bvh_ranged" and r["divergence"].isdigit()]
         if not rows:
             continue
         meta = {}
         try:
             import json
-            meta = json.load(open(os.path.join(RESULTS, s, "divergence.json")))
+            meta = json.load(open(os.path.join(RESULTS, s, stem + ".json")))
         except (OSError, ValueError):
             pass
         ts = THESIS_SCENE.get(s)
-        R.out(f"### {s} ({meta.get('width', '?')}×{meta.get('height', '?')}"
+        R.out(f"### {s}, `{stem}.csv` ({meta.get('width', '?')}×{meta.get('height', '?')}"
               f"{', camera ' + meta['camera'] if 'camera' in meta else ', views’ own fov'}"
               f"{'' if ts else '; no thesis counterpart'})\n")
         head = ["D", "deg/ray"] + [f"view {v}" for v in (1, 2, 3)]
@@ -263,7 +265,7 @@ def divergence(R):
         variant = None if "deg_per_ray" in rows[0] else "uncalibrated"
         # A control: single-ray traversal sees the same geometry at every D (§3.4), so its speed
         # should hardly move with D; when it moves by more than 30% the timings measure the machine.
-        control = [r for r in ours(s, "divergence") if r["scheme"] == "mbvh4_single" and r["divergence"].isdigit()
+        control = [r for r in ours(s, stem) if r["scheme"] == "mbvh4_single" and r["divergence"].isdigit()
                    and int(r["divergence"]) <= 8]
         spread = []
         for v in sorted({r["view"] for r in control}):
