@@ -290,6 +290,7 @@ int main(int argc, char** argv) {
       to.run = ro;
       to.run.schemes = schemes_arg == "all" ? std::vector<std::string>{} : expand_scheme_list(schemes_arg);
       to.csv = csv_path;
+      to.width_given = table->count("--width") > 0, to.height_given = table->count("--height") > 0;
       return run_table(table_name, to);
     }
     Scene scene;

@@ -16,7 +16,7 @@ namespace tb {
 
 std::string spec_key(const WorkloadSpec& s) {
   return s.name() + "@" + std::to_string(s.view) + ":" + std::to_string(s.width) + "x" + std::to_string(s.height) +
-         ":" + std::to_string(s.seed);
+         ":" + std::to_string(s.seed) + (s.hfov_deg > 0 ? ":hfov" + std::to_string(s.hfov_deg) : "");
 }
 
 Bench::Bench(Scene scene) : scene_(std::move(scene)), cache_(scene_), reference_(make_scheme("reference")) {
@@ -117,7 +117,10 @@ Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& b
         .set("tris_per_ray", double(c.tri_tests) / n)
         .set("rays_per_node", c.node_visits ? double(c.node_ray_visits) / double(c.node_visits) : 0.0)
         .set("rays_per_leaf", c.leaf_visits ? double(c.leaf_ray_visits) / double(c.leaf_visits) : 0.0)
-        .set("bytes_per_node", c.node_visits ? double(c.node_bytes) / double(c.node_visits) : 0.0);
+        .set("bytes_per_node", c.node_visits ? double(c.node_bytes) / double(c.node_visits) : 0.0)
+        // the rays the scheme scans per visit (ranged: the range width; others: rays_per_*)
+        .set("range_per_node", c.node_visits ? double(c.node_range_visits) / double(c.node_visits) : 0.0)
+        .set("range_per_leaf", c.leaf_visits ? double(c.leaf_range_visits) / double(c.leaf_visits) : 0.0);
     const StructureBytes b = scheme.memory();
     r.set("node_bytes", uint64_t(b.nodes)).set("prim_bytes", uint64_t(b.prims));
     for (const StatColumn& s : scheme.take_stat_columns()) r.set(s.name, s.value);

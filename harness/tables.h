@@ -12,6 +12,9 @@ struct TableOptions {
   std::string scene;  // empty: the table's default scene
   RunOptions run;     // run.schemes empty: the table's default scheme set
   std::string csv;
+  // Whether --width / --height were given; when not, a table measured at a stated resolution
+  // runs at the thesis' (divergence: 1280x800, §3.4).
+  bool width_given = false, height_given = false;
 };
 
 std::vector<std::string> table_names();

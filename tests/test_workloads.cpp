@@ -1,5 +1,7 @@
 // Workload generation: Fig. 16 layout, determinism, packet bookkeeping, ray/hit file round trip.
+#include <cmath>
 #include <cstring>
+#include <numbers>
 #include <fstream>
 #include <set>
 
@@ -67,16 +69,65 @@ TEST(Workloads, SeedChangesRandomRays) {
   EXPECT_NE(std::memcmp(a.rays.data(), b.rays.data(), a.size() * sizeof(Ray)), 0);
 }
 
-TEST(Workloads, DivergenceSpreadsRaysAroundTileCentre) {
+// Thesis §3.4, Tables 2-4: "Divergence is in multiples of 0.034 degrees between adjacent rays" at
+// 1280x800. On the thesis camera, the rays of the tile at the image centre are 0.034 D degrees apart
+// from their right and lower neighbours (float rays; the pinhole's own distortion over D + 0.5
+// pixels from the centre is below 1.3e-4 relative at D = 32).
+TEST(Workloads, DivergenceIsInMultiplesOfTheThesisAngle) {
   Bench bench(make_builtin_scene("room"));
-  const RayBatch d1 = primary_rays(bench.scene(), test::small_spec("primary", 512), 1.f);
-  const RayBatch d8 = primary_rays(bench.scene(), test::small_spec("primary", 512), 8.f);
-  const uint32_t centre_packet = 15 * 32 + 15;  // a tile next to the image centre
-  auto spread = [&](const RayBatch& b) {  // angle between two horizontally adjacent rays
-    const Vec3 a = b.rays[b.packet_begin[centre_packet]].dir, c = b.rays[b.packet_begin[centre_packet] + 1].dir;
-    return std::atan2(length(cross(a, c)), dot(a, c));
+  WorkloadSpec spec = test::small_spec("primary", 16);
+  spec.width = kThesisWidth, spec.height = kThesisHeight, spec.hfov_deg = thesis_hfov_deg();
+  EXPECT_NEAR(centre_pixel_deg(bench.scene(), spec), kThesisRayDeg, 1e-9);
+  const uint32_t centre_packet = (400 / 16) * (1280 / 16) + 640 / 16;  // its corner pixel is (640, 400)
+  auto deg = [](Vec3 a, Vec3 b) {
+    const double ax = a.x, ay = a.y, az = a.z, bx = b.x, by = b.y, bz = b.z;
+    const double cx = ay * bz - az * by, cy = az * bx - ax * bz, cz = ax * by - ay * bx;
+    return std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), ax * bx + ay * by + az * bz) * 180.0 / std::numbers::pi;
   };
-  EXPECT_NEAR(spread(d8) / spread(d1), 8.f, 0.3f);
+  for (int d : {1, 2, 4, 8, 16, 32}) {
+    const RayBatch b = primary_rays(bench.scene(), spec, float(d));
+    ASSERT_EQ(b.size(), size_t(1280) * 800);
+    const Ray* tile = &b.rays[b.packet_begin[centre_packet]];  // Fig. 16: rays 0, 1, 2 = (0,0), (1,0), (0,1)
+    EXPECT_NEAR(deg(tile[0].dir, tile[1].dir), kThesisRayDeg * d, 5e-4 * kThesisRayDeg * d) << "D = " << d;
+    EXPECT_NEAR(deg(tile[0].dir, tile[2].dir), kThesisRayDeg * d, 5e-4 * kThesisRayDeg * d) << "D = " << d;
+  }
+  // The views' own fields of view (55-70 degrees vertical) are not the thesis' camera.
+  spec.hfov_deg = 0;
+  EXPECT_GT(centre_pixel_deg(bench.scene(), spec), 2 * kThesisRayDeg);
+}
+
+// The tiles are scaled about their top-left corner (docs/WORKLOADS.md): the corner ray stays,
+// the ray right of it moves to D pixels right of the corner, so tiles grow right and down only.
+TEST(Workloads, DivergenceScalesAboutTheTileCorner) {
+  Bench bench(make_builtin_scene("room"));
+  for (uint32_t tile : {16u, 8u}) {
+    WorkloadSpec spec = test::small_spec("primary", 64);
+    spec.tile = tile;
+    const RayBatch d1 = primary_rays(bench.scene(), spec, 1.f), d4 = primary_rays(bench.scene(), spec, 4.f);
+    ASSERT_EQ(d1.size(), d4.size());
+    for (uint32_t p = 0; p < d1.num_packets(); ++p) {
+      const Ray* a = &d1.rays[d1.packet_begin[p]];
+      const Ray* b = &d4.rays[d4.packet_begin[p]];
+      // Fig. 16 order: ray 0 is pixel (0,0) of the packet, ray 1 (1,0), ray 8 (4,0).
+      EXPECT_EQ(std::memcmp(&a[0].dir, &b[0].dir, sizeof(Vec3)), 0) << "packet " << p;
+      EXPECT_EQ(std::memcmp(&a[8].dir, &b[1].dir, sizeof(Vec3)), 0) << "packet " << p << " tile " << tile;
+    }
+  }
+}
+
+// bounce:k/p: Russian roulette with survival p at each surface; p = 1 is plain bounce:k.
+TEST(Workloads, RussianRouletteKeepsAFractionPOfThePathsPerBounce) {
+  EXPECT_EQ(parse_workload("bounce:2/0.5").name(), "bounce:2/0.5");
+  EXPECT_DOUBLE_EQ(parse_workload("bounce:2/0.5").survival, 0.5);
+  EXPECT_EQ(parse_workload("bounce:2/1").name(), "bounce:2");
+  for (const char* bad : {"bounce:2/0", "bounce:2/1.5", "bounce:2/x", "bounce:2/", "bounce:2/-0.5"})
+    EXPECT_THROW(parse_workload(bad), InputError) << bad;
+  Bench bench(make_builtin_scene("room"));  // closed: nearly every path bounces
+  const RayBatch all = generate_workload(bench.scene(), test::small_spec("bounce:2", 64), closest_hits_of(bench.reference()));
+  const RayBatch rr = generate_workload(bench.scene(), test::small_spec("bounce:2/0.5", 64), closest_hits_of(bench.reference()));
+  // Expected 0.25 of the paths (about 1000 of 4096; 5 standard deviations either side).
+  EXPECT_NEAR(double(rr.size()) / double(all.size()), 0.25, 0.04);
+  EXPECT_EQ(rr.workload, "bounce:2/0.5");
 }
 
 TEST(Workloads, BounceRaysKeepTheirPixelsPacket) {

@@ -92,6 +92,18 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
     return g0 * kW + 31 - std::countl_zero(first_mask);
   }
 
+  // Thesis Table 8 counts "the average number of rays (of the original packet) that intersects each
+  // visited node" (§5.2.3), not the width l - f + 1 of the range the scheme scans (which also holds
+  // rays that miss it). Instrumented path only; a NullProbe, because this count is no access the
+  // scheme makes.
+  template <bool kCommon>
+  static uint32_t rays_hitting(const Packet& pk, const NodeTester<kCommon>& box, uint32_t f, uint32_t l) {
+    NullProbe none;
+    uint32_t n = 0;
+    for (uint32_t g = f / kW; g <= l / kW; ++g) n += std::popcount(test_group<kCommon>(pk, g, box, none) & range_mask(g, f, l));
+    return n;
+  }
+
   template <TriKernel K, bool kCommon, class P>
   void traverse(Packet& pk, Entry* stack, P& probe) const {
     const BVHNode* nodes = data_.tree->nodes.data();
@@ -104,7 +116,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
       if (f != kNone) {
         const uint32_t l = track_last_ ? find_last<kCommon>(pk, box, f, last, fmask, probe) : last;
         if (!nd.is_leaf()) {
-          probe.node(&nd, sizeof(BVHNode), l - f + 1);
+          if constexpr (P::enabled) probe.node_range(&nd, sizeof(BVHNode), rays_hitting<kCommon>(pk, box, f, l), l - f + 1);
           probe.read(&nodes[nd.left_first], 2 * sizeof(BVHNode));  // children, for the order
           const bool rf = right_first(&nodes[nd.left_first], pk.mean_dir);
           stack[sp++] = {nd.left_first + (rf ? 0u : 1u), uint16_t(f), uint16_t(l)};
@@ -113,7 +125,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
           first = f, last = l;
           continue;
         }
-        probe.leaf(&nd, sizeof(BVHNode), l - f + 1);
+        if constexpr (P::enabled) probe.leaf_range(&nd, sizeof(BVHNode), rays_hitting<kCommon>(pk, box, f, l), l - f + 1);
         intersect_leaf<K, kCommon>(pk, nd, box, f, l, fmask, probe);
       } else {
         probe.read(&nd, sizeof(BVHNode));  // fetched to be culled: not a visit, still a read

@@ -13,11 +13,15 @@ struct TraversalCounts {
   uint64_t node_ray_visits = 0;  // sum over interior visits of the active rays at that visit
   uint64_t leaf_visits = 0;
   uint64_t leaf_ray_visits = 0;
+  // Sum over visits of the rays the scheme iterates over there: the range [first, last] of ranged
+  // traversal, which also holds rays that miss the node; equal to the *_ray_visits elsewhere.
+  uint64_t node_range_visits = 0, leaf_range_visits = 0;
   uint64_t tri_tests = 0;        // ray-triangle tests (per ray-triangle pair)
   uint64_t node_bytes = 0;       // bytes the interior node visits read (a visit reads its node once)
   void add(const TraversalCounts& o) {
     rays += o.rays; node_visits += o.node_visits; node_ray_visits += o.node_ray_visits; node_bytes += o.node_bytes;
     leaf_visits += o.leaf_visits; leaf_ray_visits += o.leaf_ray_visits; tri_tests += o.tri_tests;
+    node_range_visits += o.node_range_visits; leaf_range_visits += o.leaf_range_visits;
   }
 };
 
@@ -25,6 +29,8 @@ struct NullProbe {
   static constexpr bool enabled = false;
   void node(const void*, uint32_t, uint32_t = 1) {}
   void leaf(const void*, uint32_t, uint32_t = 1) {}
+  void node_range(const void*, uint32_t, uint32_t, uint32_t) {}
+  void leaf_range(const void*, uint32_t, uint32_t, uint32_t) {}
   void tris(const void*, uint32_t, uint32_t = 1) {}
   void read(const void*, uint32_t) {}
   void write(const void*, uint32_t) {}
@@ -38,12 +44,19 @@ class Probe {
   cachesim::Hierarchy* cache = nullptr;
 
   // An interior node of `bytes` bytes at `p` visited by `active` rays at once.
-  void node(const void* p, uint32_t bytes, uint32_t active = 1) {
-    if (counts) { counts->node_visits++; counts->node_ray_visits += active; counts->node_bytes += bytes; }
+  void node(const void* p, uint32_t bytes, uint32_t active = 1) { node_range(p, bytes, active, active); }
+  void leaf(const void* p, uint32_t bytes, uint32_t active = 1) { leaf_range(p, bytes, active, active); }
+  // The same when the scheme iterates over `range` rays of which `active` intersect the node
+  // (ranged traversal: thesis Table 8 counts the rays that intersect, §5.2.3).
+  void node_range(const void* p, uint32_t bytes, uint32_t active, uint32_t range) {
+    if (counts) {
+      counts->node_visits++; counts->node_ray_visits += active; counts->node_range_visits += range;
+      counts->node_bytes += bytes;
+    }
     if (cache) read(p, bytes);
   }
-  void leaf(const void* p, uint32_t bytes, uint32_t active = 1) {
-    if (counts) { counts->leaf_visits++; counts->leaf_ray_visits += active; }
+  void leaf_range(const void* p, uint32_t bytes, uint32_t active, uint32_t range) {
+    if (counts) { counts->leaf_visits++; counts->leaf_ray_visits += active; counts->leaf_range_visits += range; }
     if (cache) read(p, bytes);
   }
   // Triangle data of `bytes` bytes read and tested against `tests` rays.

@@ -1,6 +1,7 @@
 #include "workloads/workload.h"
 
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 
 #include "workloads/camera.h"
@@ -10,6 +11,11 @@ namespace tb {
 
 std::string WorkloadSpec::name() const {
   if (kind == "divergence" && tile != 16) return kind + ":" + std::to_string(param) + "/" + std::to_string(tile);
+  if (kind == "bounce" && survival < 1.0) {
+    char p[32];
+    std::snprintf(p, sizeof p, "%g", survival);
+    return kind + ":" + std::to_string(param) + "/" + p;
+  }
   if (kind == "divergence" || kind == "bounce") return kind + ":" + std::to_string(param);
   return kind;
 }
@@ -31,6 +37,15 @@ WorkloadSpec parse_workload(const std::string& text) {
     if (t != "1" && t != "2" && t != "4" && t != "8" && t != "16")
       throw InputError("workload '" + text + "': the tile of divergence:D/T must be 1, 2, 4, 8 or 16 (it divides the 16x16 packet)");
     s.tile = uint32_t(std::stoul(t));
+  }
+  if (s.kind == "bounce" && arg.find('/') != std::string::npos) {  // bounce:k/p
+    const std::string p = arg.substr(arg.find('/') + 1);
+    arg = arg.substr(0, arg.find('/'));
+    char* end = nullptr;
+    const double v = std::strtod(p.c_str(), &end);
+    if (p.empty() || *end != '\0' || !(v > 0.0 && v <= 1.0))
+      throw InputError("workload '" + text + "': the Russian-roulette survival p of bounce:k/p must be in (0, 1]");
+    s.survival = v;
   }
   auto int_arg = [&](int lo, int hi) {
     char* end = nullptr;
@@ -62,6 +77,16 @@ const CameraView& view_of(const Scene& scene, const WorkloadSpec& spec) {
   if (spec.view >= scene.views.size())
     throw InputError("view " + std::to_string(spec.view + 1) + " does not exist in scene '" + scene.name + "'");
   return scene.views[spec.view];
+}
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+// The view with spec.hfov_deg (when set) in place of its vfov, for the spec's aspect ratio.
+CameraView camera_view(const Scene& scene, const WorkloadSpec& spec) {
+  CameraView v = view_of(scene, spec);
+  if (spec.hfov_deg > 0)
+    v.vfov_deg = float(2.0 * std::atan(std::tan(0.5 * spec.hfov_deg * kDeg) * spec.height / spec.width) / kDeg);
+  return v;
 }
 
 // Orthonormal basis around n (Duff et al. 2017).
@@ -189,6 +214,9 @@ RayBatch path_rays(const Scene& scene, const WorkloadSpec& spec, const ClosestHi
         r.tmax = dist * (1.f - 1e-4f);
       } else {
         Rng rng(spec.seed ^ (uint64_t(depth) << 56), i);
+        // Russian roulette (thesis §2.1.6, Alg. 6.1): the path goes on with probability p. The
+        // draw comes first and only when p < 1, so bounce:k without roulette keeps its rays.
+        if (spec.survival < 1.0 && !(rng.uniform() < spec.survival)) continue;
         r.dir = cosine_hemisphere(n, rng);
       }
       next.rays.push_back(r);
@@ -206,8 +234,15 @@ RayBatch path_rays(const Scene& scene, const WorkloadSpec& spec, const ClosestHi
 
 }  // namespace
 
+double thesis_hfov_deg() { return 2.0 * std::atan(kThesisWidth * std::tan(0.5 * kThesisRayDeg * kDeg)) / kDeg; }
+
+double centre_pixel_deg(const Scene& scene, const WorkloadSpec& spec) {
+  const double focal = 0.5 * spec.height / std::tan(0.5 * double(camera_view(scene, spec).vfov_deg) * kDeg);
+  return 2.0 * std::atan(0.5 / focal) / kDeg;  // pixel centres 0.5 px either side of the image centre
+}
+
 RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float divergence) {
-  const Camera cam(view_of(scene, spec), spec.width, spec.height);
+  const Camera cam(camera_view(scene, spec), spec.width, spec.height);
   RayBatch b;
   b.common_origin = true;
   b.packet_size = 256;
@@ -218,13 +253,14 @@ RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float diverg
       for (uint32_t i = 0; i < 256; ++i) {
         uint32_t x, y;
         fig16_pixel(i, x, y);
-        const float half = 0.5f * float(spec.tile);
-        const float cx = float(tx + x / spec.tile * spec.tile) + half, cy = float(ty + y / spec.tile * spec.tile) + half;
+        // The anchor: the centre of the tile's top-left pixel, whose ray is the same at every D;
+        // the tile's other rays move right and down, D pixels apart (§3.4, docs/WORKLOADS.md).
+        const float ax = float(tx + x / spec.tile * spec.tile) + 0.5f, ay = float(ty + y / spec.tile * spec.tile) + 0.5f;
         x += tx, y += ty;
         if (x >= spec.width || y >= spec.height) continue;
         Ray r;
         r.org = cam.eye;
-        r.dir = cam.direction(cx + divergence * (x + 0.5f - cx), cy + divergence * (y + 0.5f - cy));
+        r.dir = cam.direction(ax + divergence * (x + 0.5f - ax), ay + divergence * (y + 0.5f - ay));
         b.rays.push_back(r);
         b.pixel.push_back(y * spec.width + x);
       }

@@ -19,14 +19,32 @@ using ClosestHitFn = std::function<void(const RayBatch&, std::span<Hit>)>;
 struct WorkloadSpec {
   std::string kind;   // primary, divergence, rnd, rnd2, bounce, shadow, hard:*
   int param = 1;      // D for divergence, k for bounce
-  // divergence only: the side of the square tiles around whose centres D scales the ray angles
-  // ("divergence:D/T"; 16 = the 16x16 packets of thesis §3.4, 8 = the 8x8 tiles of Table 12, §6.2.1).
+  // divergence only: the side of the square tiles whose top-left corner D scales the ray angles
+  // about ("divergence:D/T"; 16 = the 16x16 packets of thesis §3.4, 8 = the 8x8 tiles of Table 12,
+  // §6.2.1; docs/WORKLOADS.md argues the corner).
   uint32_t tile = 16;
+  // bounce only: the Russian-roulette survival probability at each surface ("bounce:k/p"; 1 = no
+  // roulette, docs/WORKLOADS.md argues the default). The thesis' path tracer (Alg. 6.1) uses it.
+  double survival = 1.0;
+  // Camera workloads: the horizontal field of view in degrees that replaces the view's vfov, or 0
+  // for the view's own. The thesis tables set thesis_hfov_deg(), the camera of Tables 2-4.
+  double hfov_deg = 0;
   uint32_t width = 512, height = 512;
   uint32_t view = 0;  // index into scene.views
   uint64_t seed = 1;
   std::string name() const;  // canonical name, e.g. "divergence:8", "divergence:8/8"
 };
+
+// Thesis §3.4, Tables 2-4: "Divergence is in multiples of 0.034 degrees between adjacent rays",
+// measured at 1280x800. The horizontal field of view that puts the two pixels beside the image
+// centre of a 1280-pixel-wide pinhole camera 0.034 degrees apart (41.6 degrees).
+inline constexpr double kThesisRayDeg = 0.034;
+inline constexpr uint32_t kThesisWidth = 1280, kThesisHeight = 800;
+double thesis_hfov_deg();
+// The angle in degrees between the rays through the two pixels beside the centre of the image of
+// spec's camera (spec.width, spec.height, spec.hfov_deg or the view's vfov): divergence:D puts
+// adjacent rays of a tile D times this apart at the tile's corner (the deg_per_ray column).
+double centre_pixel_deg(const Scene& scene, const WorkloadSpec& spec);
 
 // Parses "primary", "divergence:D", "rnd", "rnd2", "bounce:k", "shadow" (and the hard cases);
 // throws InputError naming the problem.
@@ -40,8 +58,9 @@ RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const C
 
 // Primary rays in 16x16 packets, Fig. 16 layout (thesis §3.3): each packet is four 8x8 quadrants
 // of 64 rays, each quadrant sixteen 2x2 groups. D scales the angle between adjacent rays of a
-// tile (spec.tile x spec.tile pixels, aligned within the packet) around the tile centre (§3.4),
-// so D > 1 tiles overlap and touch the same geometry.
+// tile (spec.tile x spec.tile pixels, aligned within the packet) about the tile's top-left corner
+// (§3.4), so D > 1 tiles overlap the tiles right of and below them and, but for the right column
+// and bottom row of tiles, touch the same geometry as D = 1.
 RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float divergence);
 
 // Pixel of the i-th ray (0..255) of a 16x16 packet in the Fig. 16 layout.

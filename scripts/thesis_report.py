@@ -1,0 +1,555 @@
+#!/usr/bin/python3
+"""Writes results/THESIS.md: the thesis' tables beside ours, and every ordering or ratio claim the
+thesis makes about them as a check (✓ / ✗ with the numbers).
+
+    /usr/bin/python3 scripts/thesis_report.py [--out results/THESIS.md]
+
+Reads only committed files: the CSVs under results/ and the thesis tables transcribed in
+../shared/reference/. A claim is checked on every scene we have a CSV for; the thesis' own numbers
+are checked too (the "thesis" column), so a claim the thesis' table itself contradicts shows. Every
+✗ gets the explanation of EXPLAIN (a measured or documented cause, with where it is measured), or
+"unexplained".
+"""
+import argparse
+import csv
+import os
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RESULTS = os.path.join(ROOT, "results")
+REFERENCE = os.path.join(ROOT, "..", "shared", "reference")
+
+# Our results folder -> the thesis' scene key (scene substitutions: ../shared/scenes/README.md).
+THESIS_SCENE = {"sponza": "sponza", "sibenik_lucy": "sibenik_lucy", "conference": "conference"}
+SUBSTITUTES = ("Sponza: 66k triangles here, 93k in the thesis; Sibenik+Lucy: 175k (Lucy decimated to 100k), "
+               "603k in the thesis; Conference: 331k, 273k in the thesis; Modern Room and Soda Hall are not "
+               "available (the built-in `room` is a procedural stand-in, not compared by value) "
+               "(../shared/scenes/README.md)")
+
+
+def read_csv(path):
+    if not os.path.exists(path):
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(line for line in f if not line.startswith("#")))
+
+
+def ref(name):
+    return read_csv(os.path.join(REFERENCE, name))
+
+
+def ours(scene, table):
+    return read_csv(os.path.join(RESULTS, scene, table + ".csv"))
+
+
+def num(v):
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return None
+
+
+def f(v, d=2):
+    return "—" if v is None else f"{v:.{d}f}"
+
+
+def scenes_with(table):
+    return sorted(s for s in os.listdir(RESULTS) if os.path.exists(os.path.join(RESULTS, s, table + ".csv")))
+
+
+def md_table(head, rows):
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+# ---- explanations of ✗, keyed by claim id, or "id@variant" for one kind of row (thesis: the thesis'
+# own numbers; uncalibrated: a divergence CSV made before the calibration; nocounterpart: a scene
+# the thesis did not measure). Each names the measurement or document behind it; "unexplained" where
+# none is known (then with what was measured around it).
+UNEXPLAINED = "unexplained"
+EXPLAIN = {
+    "t1.threads_rebuild_more": (
+        "documented: Table 1 is not yet run as the thesis ran it (issue 18, part 2): ours times one `spheres:N` "
+        "mesh with plain binned SAH on 1 and 2 threads of the shared 2-core VM (results/README.md), the thesis a "
+        "group of 4 objects with spatial splits under a top-level BVH on 1 and 4 threads: a different build."),
+    "t2-4.monotone@uncalibrated": (
+        "documented: this CSV predates the calibration (256², the views' 55–70° fov: its D = 1 is already "
+        "0.23–0.31° between adjacent rays, the thesis' D ≈ 7–9; docs/WORKLOADS.md), so its D ≤ 8 rows are the "
+        "thesis' D ≈ 7–70."),
+    "t2-4.d8@uncalibrated": (
+        "documented and measured: this CSV predates the calibration (256², the views' 55–70° fov, 0.23–0.31° "
+        "between adjacent rays; docs/WORKLOADS.md): its D = 1 packet already spans 16 × 0.23–0.31° = 3.7–5.0°, "
+        "the thesis' D = 8 packet (16 × 8 × 0.034° = 4.4°), so its D = 8 / D = 1 is a ratio between two "
+        "divergent levels, near the floor the same CSV shows (its D = 16 and 32 rows hardly fall further). "
+        "Calibrated CSVs (with `deg_per_ray`) are the comparable ones."),
+    "t2-4.d8": UNEXPLAINED,
+    "t2-4.monotone@noisy": (
+        "measured: the machine, not the scheme. Single-ray traversal (mbvh4_single) sees the same geometry at "
+        "every D and hardly moves on a quiet machine (1.05–1.19x over D = 1…8 in the quiet runs of "
+        "results/{sponza,conference,room}/divergence.csv), yet here it moved by the factor printed above; "
+        "the run shared the 2-core VM with other builds (load average 9–13, results/README.md), and single cells "
+        "spread up to 1.8x between their own repetitions (mrays_min/mrays_max). Re-run on a quiet machine."),
+    "t2-4.d8@noisy": (
+        "measured: as above, the single-ray control moved by the factor printed across D, so these ratios "
+        "are dominated by the machine's load (results/README.md); re-run on a quiet machine."),
+    "t7.primary_ranged_best": UNEXPLAINED,
+    "t7.bounce1_packets_below_single": UNEXPLAINED,
+    "t7.depth3_ranged": (
+        "unexplained. Measured around it: callgrind counts bvh_ranged at 8,756 instructions per ray on Sponza "
+        "bounce 3 against mbvh4_single's 1,596 (docs/PERFORMANCE.md, Instructions per ray), 5.5x, while it runs "
+        "at 47–75% of its speed here — so the gap to the thesis is not in the instruction count; the bounce.csv "
+        "rays per node of bvh_ranged in these CSVs are range widths (Table 8 below), not a measure of it."),
+    "t7.depth3_ranged@thesis": (
+        "documented: the thesis' own Table 7 gives ranged/single = 0.715/1.583 = 45% on Conference; the text's "
+        "17–26% does not cover that row."),
+    "t7.depth3_partition": (
+        "unexplained. Measured around it: bvh_partition 6,892 vs mbvh4_single 1,596 instructions per ray on "
+        "Sponza bounce 3 (docs/PERFORMANCE.md)."),
+    "t7.depth3_partition@nocounterpart": (
+        "unexplained; a built-in scene without a thesis counterpart (README), where the thesis' range over its "
+        "own scenes need not hold. Measured around it: bvh_partition 6,892 vs mbvh4_single 1,596 instructions "
+        "per ray on Sponza bounce 3 (docs/PERFORMANCE.md)."),
+    "t7.depth3_mbvhrs": (
+        "unexplained. Measured around it: mbvh_rs executes 2,497 instructions per ray on Sponza bounce 3 against "
+        "mbvh4_single's 1,596 (docs/PERFORMANCE.md), 1.56x more, and is still faster: its gain is memory "
+        "locality, which the cache table models; why its gain is larger than in the thesis is not measured."),
+    "t7.ranged_below_partition": (
+        "unexplained. Measured around it: callgrind counts bvh_ranged at 8,486 / 8,756 instructions per ray on "
+        "Sponza bounce 2 / 3 against bvh_partition's 6,675 / 6,892 (docs/PERFORMANCE.md), 1.27x more, yet it "
+        "runs only 0–6% slower here; the thesis' ranged took 1.3–1.9x partition's time."),
+    "t7.rs_vs_single_deep": (
+        "unexplained (see t7.depth3_mbvhrs: our MBVH/RS is 1.1–1.3x single-ray at bounces 2–3 on every scene; "
+        "the thesis' ordering on the same scene is given beside ours)."),
+    "t8.rs_more_rays": UNEXPLAINED,
+    "t8.leaf_to_one@nocounterpart": (
+        "documented: the claim is about the thesis' Modern Room; `room` and `stadium` are our built-in "
+        "procedural scenes (README), not thesis scenes; why their leaves keep more rays is not measured."),
+    "t9.rg_beats_rs": (
+        "unexplained. Measured around it: raygrid executes fewer instructions per ray than mbvh_rs on Sponza "
+        "bounce 3 (2,255 vs 2,497, docs/PERFORMANCE.md), so the difference is not instruction count; "
+        "docs/PERFORMANCE.md (RayGrid) measures RayGrid winning where the working set exceeds the caches "
+        "(the Sponza scenes) and tying on Conference."),
+    "t9.rg_beats_single": (
+        "unexplained (stadium: a built-in scene; docs/PERFORMANCE.md measures RayGrid's gain as memory "
+        "locality, which a small scene does not need)."),
+    "t10.rg_more_rays": UNEXPLAINED,
+    "t11.cost_rg_below_rs": (
+        "unexplained. Known differences (issue 18): `table cache` runs the 8-wide layouts, not the thesis' "
+        "4-wide ones, and our access counts are ~30x below the thesis' per ray (unexplained too)."),
+    "t11.l3_rg_below_rs": UNEXPLAINED,
+    "t12.d8_94": (
+        "measured, docs/SIMT.md (Results): the numbers are a warp MODEL, not a GPU; every modelled row is "
+        "issue-bound, and from D = 1 to D = 8 the steps per ray rise 24% and the distinct lines per ray 2.2x, "
+        "which the model charges as load replays; with replays free D = 8 is 81%; the GTX470 was not "
+        "issue-bound on coherent rays, a cost the model does not have."),
+    "t12.d32_70": "measured, docs/SIMT.md (Results): as for D = 8, the modelled rows are issue-bound (warp model, not a GPU).",
+    "t12.rnd_50@nocounterpart": (
+        "documented: Conference is not one of the thesis' four GPU scenes (docs/SIMT.md: 'Conference has none'); "
+        "the bound is the thesis' over its scenes."),
+    "t12.rnd2_38@nocounterpart": (
+        "documented: Conference is not one of the thesis' GPU scenes; docs/SIMT.md: on Conference, where rnd2 "
+        "rays are long, the model's 32% (48% if-if) is near the thesis' scenes' 43-44%."),
+    "t12.d8_94@nocounterpart": "as t12.d8_94 (docs/SIMT.md); Conference also has no thesis counterpart.",
+    "t12.d32_70@nocounterpart": "as t12.d32_70 (docs/SIMT.md); Conference also has no thesis counterpart.",
+    "t13.o32": (
+        "unexplained: docs/SIMT.md measures 1.40–1.43x per doubling of the active lanes (while-while) against "
+        "the thesis' 1.49–1.52x and gives no cause."),
+}
+
+
+class Report:
+    def __init__(self):
+        self.lines = []
+        self.checks = []  # (ok, id)
+
+    def out(self, s=""):
+        self.lines.append(s)
+
+    def check(self, cid, text, ok, numbers, variant=None):
+        mark = "✓" if ok else "✗"
+        why = EXPLAIN.get(f"{cid}@{variant}", EXPLAIN.get(cid, UNEXPLAINED)) if variant else EXPLAIN.get(cid, UNEXPLAINED)
+        self.checks.append((ok, why))
+        line = f"- {mark} **{text}** — {numbers}"
+        if not ok:
+            line += f"\n  - *why:* {why}"
+        self.out(line)
+
+
+def table1(R):
+    R.out("## Table 1 — BVH rebuild and refit (ms)")
+    t1 = ref("table01_build_refit.csv")
+    rows = []
+    for s in sorted(scenes_with("build"), key=lambda x: x != "sponza"):
+        for r in ours(s, "build"):
+            if r.get("thesis_ms"):
+                rows.append(r)
+        if rows:
+            src = s
+            break
+    if not rows:
+        R.out("No build.csv with thesis columns.\n")
+        return
+    R.out(f"Ours from `results/{src}/build.csv` (`spheres:N`, binned SAH, threads as labelled); thesis: a group "
+          "of 4 objects, 1 and 4 threads.\n")
+    R.out(md_table(["structure", "triangles", "threads", "rebuild ms", "thesis", "refit ms", "thesis refit"],
+                   [[r["structure"], r["triangles"], r["threads"], f(num(r["build_ms"])), r["thesis_ms"],
+                     f(num(r["refit_ms"])), r["thesis_refit_ms"]] for r in rows]))
+    R.out()
+    one = [r for r in rows if r["threads"] == "1"]
+    ok = all(num(r["refit_ms"]) < num(r["build_ms"]) for r in one)
+    R.check("t1.refit_faster", "Refit is faster than rebuild (thesis: 7-15x)", ok,
+            "; ".join(f"{r['triangles']}: {num(r['build_ms']) / max(num(r['refit_ms']), 1e-9):.1f}x" for r in one) +
+            " (thesis " + ", ".join(f"{float(t['rebuild_1t_ms']) / float(t['refit_1t_ms']):.1f}x" for t in t1) + ")")
+    multi = {}
+    for r in rows:
+        multi.setdefault(r["triangles"], {})[r["threads"]] = r
+    parts, ok = [], True
+    for tri, by in sorted(multi.items(), key=lambda kv: int(kv[0])):
+        if "1" not in by or len(by) < 2:
+            continue
+        n = max(by, key=int)
+        sb = num(by["1"]["build_ms"]) / num(by[n]["build_ms"])
+        sr = num(by["1"]["refit_ms"]) / num(by[n]["refit_ms"])
+        ok = ok and sb > sr
+        parts.append(f"{tri}: rebuild {sb:.2f}x, refit {sr:.2f}x on {n} threads")
+    tt = "; ".join(f"{t['triangles']}: rebuild {float(t['rebuild_1t_ms']) / float(t['rebuild_4t_ms']):.1f}x, "
+                   f"refit {float(t['refit_1t_ms']) / float(t['refit_4t_ms']):.1f}x" for t in t1)
+    R.check("t1.threads_rebuild_more", "Threads speed up rebuild more than refit", ok,
+            "; ".join(parts) + f" (thesis, 4 threads: {tt})")
+    R.out()
+
+
+def divergence(R):
+    R.out("## Tables 2–4 — ranged packets vs divergence D (Mrays/s, % of D = 1)")
+    R.out("Thesis: 1280×800, adjacent rays 0.034°·D apart, one 3.4 GHz Xeon core, Arauna's ranged packets. "
+          "Ours: `bvh_ranged` rows of `results/<scene>/divergence.csv`; the resolution and angle each CSV ran at "
+          "are in its columns (`deg_per_ray`, absent in CSVs made before the calibration) and sidecar.\n")
+    t = ref("table02-04_packet_divergence_cpu.csv")
+    # divergence.csv as run.sh makes it; divergence_thesis.csv where a calibrated run was kept beside an
+    # older uncalibrated one (results/README.md).
+    for s, stem in sorted((s, st) for st in ("divergence", "divergence_thesis") for s in scenes_with(st)):
+        rows = [r for r in ours(s, stem) if r["scheme"] == "bvh_ranged" and r["divergence"].isdigit()]
+        if not rows:
+            continue
+        meta = {}
+        try:
+            import json
+            meta = json.load(open(os.path.join(RESULTS, s, stem + ".json")))
+        except (OSError, ValueError):
+            pass
+        ts = THESIS_SCENE.get(s)
+        R.out(f"### {s}, `{stem}.csv` ({meta.get('width', '?')}×{meta.get('height', '?')}"
+              f"{', camera ' + meta['camera'] if 'camera' in meta else ', views’ own fov'}"
+              f"{'' if ts else '; no thesis counterpart'})\n")
+        head = ["D", "deg/ray"] + [f"view {v}" for v in (1, 2, 3)]
+        if ts:
+            head += [f"thesis view {v}" for v in (1, 2, 3)]
+        body = []
+        for d in sorted({int(r["divergence"]) for r in rows}):
+            by = {r["view"]: r for r in rows if int(r["divergence"]) == d}
+            any_r = next(iter(by.values()))
+            line = [d, any_r.get("deg_per_ray", "") and f(num(any_r.get("deg_per_ray")), 3)]
+            for v in ("1", "2", "3"):
+                r = by.get(v)
+                line.append(f"{f(num(r['mrays_median']))} ({f(num(r['pct_of_d1']), 0)}%)" if r else "—")
+            if ts:
+                tr = [x for x in t if x["scene"] == ts and x["divergence"] == str(d)]
+                t1 = [x for x in t if x["scene"] == ts and x["divergence"] == "1"]
+                for v in (1, 2, 3):
+                    if tr:
+                        a, b = float(tr[0][f"view{v}_mrays"]), float(t1[0][f"view{v}_mrays"])
+                        line.append(f"{a:.2f} ({100 * a / b:.0f}%)")
+                    else:
+                        line.append("")
+            body.append(line)
+        R.out(md_table(head, body))
+        R.out()
+        # §3.4: "even for primary rays, ray divergence considerably affects traversal efficiency"
+        variant = None if "deg_per_ray" in rows[0] else "uncalibrated"
+        # A control: single-ray traversal sees the same geometry at every D (§3.4), so its speed
+        # should hardly move with D; when it moves by more than 30% the timings measure the machine.
+        control = [r for r in ours(s, stem) if r["scheme"] == "mbvh4_single" and r["divergence"].isdigit()
+                   and int(r["divergence"]) <= 8]
+        spread = []
+        for v in sorted({r["view"] for r in control}):
+            xs = [num(r["mrays_median"]) for r in control if r["view"] == v]
+            spread.append((v, max(xs) / min(xs)))
+        spread_text = ("; single-ray control (mbvh4_single) max/min over D = 1…8: " +
+                       ", ".join(f"view {v} {x:.2f}x" for v, x in spread)) if spread else ""
+        if variant is None and spread and max(x for _, x in spread) > 1.3:
+            variant = "noisy"
+        views = sorted({r["view"] for r in rows})
+        mono, parts = True, []
+        for v in views:
+            seq = [num(r["mrays_median"]) for r in sorted((r for r in rows if r["view"] == v and int(r["divergence"]) <= 8),
+                                                          key=lambda r: int(r["divergence"]))]
+            mono = mono and all(a > b for a, b in zip(seq, seq[1:]))
+            parts.append(f"view {v}: " + " > ".join(f(x) for x in seq))
+        R.check("t2-4.monotone", f"{s}: throughput falls with every doubling of D = 1…8 (every view; §3.4 “ray "
+                "divergence considerably affects traversal efficiency”)", mono, "; ".join(parts) + spread_text, variant)
+        # §6.2.1: "CPU ray traversal efficiency drops to 30% or less for D=8" (thesis: 21-31%)
+        d8 = [num(r["pct_of_d1"]) for r in rows if r["divergence"] == "8"]
+        if d8:
+            R.check("t2-4.d8", f"{s}: at D = 8 ranged packets keep ≤ 31% of D = 1 (thesis 21–31%, §6.2.1 "
+                    "“drops to 30% or less”)", max(d8) <= 31.5, ", ".join(f"{x:.0f}%" for x in d8) + spread_text, variant)
+        R.out()
+
+
+def t7_rows(scene):
+    rows = ours(scene, "bounce")
+    by = {}
+    for r in rows:
+        by[(r["scheme"], int(r["depth"]))] = r
+    return by
+
+
+def bounce(R):
+    R.out("## Table 7 — schemes by bounce depth (Mrays/s)")
+    R.out("Thesis: one 3.8 GHz Xeon core, 4-ary MBVH single-ray baseline. Ours: `results/<scene>/bounce.csv` "
+          "(mbvh_rs in the thesis' 4-wide layout, column `layout`). " + SUBSTITUTES + ".\n")
+    t7 = ref("table07_schemes_by_bounce.csv")
+    tmap = {"mbvh4_single": "mbvh_single", "bvh_partition": "partition", "bvh_ranged": "ranged", "mbvh_rs": "mbvh_rs"}
+    for s in scenes_with("bounce"):
+        by = t7_rows(s)
+        ts = THESIS_SCENE.get(s)
+        head = ["scheme"] + [f"depth {d}" for d in range(4)]
+        body = []
+        for sc, tn in tmap.items():
+            line = [sc]
+            for d in range(4):
+                r = by.get((sc, d))
+                tv = next((x[f"depth{d}"] for x in t7 if ts and x["scene"] == ts and x["scheme"] == tn), None)
+                line.append((f(num(r["mrays_median"])) if r else "—") + (f" ({tv})" if tv else ""))
+            body.append(line)
+        R.out(f"### {s}" + (f" (thesis in parentheses)" if ts else " (no thesis counterpart)") + "\n")
+        R.out(md_table(head, body))
+        R.out()
+
+    def ratio(get, scheme, d):
+        a, b = get(scheme, d), get("mbvh4_single", d)
+        return None if a is None or b is None or b == 0 else a / b
+
+    sources = []  # (label, getter, variant for EXPLAIN)
+    for s in scenes_with("bounce"):
+        by = t7_rows(s)
+        sources.append((s, lambda sc, d, by=by: num(by[(sc, d)]["mrays_median"]) if (sc, d) in by else None,
+                        None if s in THESIS_SCENE else "nocounterpart"))
+    inv = {v: k for k, v in tmap.items()}
+
+    def thesis_getter(ts):
+        tb = {(inv.get(x["scheme"]), d): float(x[f"depth{d}"]) for x in t7 if x["scene"] == ts for d in range(4)}
+        return lambda sc, d: tb.get((sc, d))
+    for ts in sorted({x["scene"] for x in t7}):
+        sources.append((f"thesis {ts}", thesis_getter(ts), "thesis"))
+
+    R.out("Claims of §5.2.3 (checked on ours and, as a control, on the thesis' own rows):\n")
+    for name, get, variant in sources:
+        vals = {sc: get(sc, 0) for sc in tmap}
+        if None in vals.values():
+            continue
+        others = max(v for k, v in vals.items() if k != "bvh_ranged")
+        R.check("t7.primary_ranged_best", f"{name}: on primary rays ranged traversal beats every other scheme",
+                vals["bvh_ranged"] > others,
+                ", ".join(f"{k} {f(v)}" for k, v in vals.items()), variant)
+    for name, get, variant in sources:
+        rp, rr = ratio(get, "bvh_partition", 1), ratio(get, "bvh_ranged", 1)
+        if rp is None or rr is None:
+            continue
+        R.check("t7.bounce1_packets_below_single", f"{name}: after one bounce partition and ranged are slower "
+                "than single-ray (“only MBVH/RS outperforms single ray traversal”)", rp < 1 and rr < 1,
+                f"partition/single {rp:.2f}, ranged/single {rr:.2f}", variant)
+    for cid, sc, lo, hi, label in (("t7.depth3_ranged", "bvh_ranged", 0.17, 0.26, "17–26%"),
+                                   ("t7.depth3_partition", "bvh_partition", 0.27, 0.60, "27–60%"),
+                                   ("t7.depth3_mbvhrs", "mbvh_rs", 0.79, 1.06, "79–106%")):
+        for name, get, variant in sources:
+            r3 = ratio(get, sc, 3)
+            if r3 is None:
+                continue
+            R.check(cid, f"{name}: after three bounces {sc} achieves {label} of single-ray", lo - 0.005 <= r3 <= hi + 0.005,
+                    f"{100 * r3:.0f}%", variant)
+    # In the table, not the text: ranged is slower than partition after a bounce (thesis ratio 0.52–0.75).
+    for name, get, variant in sources:
+        rs = [get("bvh_ranged", d) / get("bvh_partition", d) for d in (1, 2, 3)
+              if get("bvh_ranged", d) is not None and get("bvh_partition", d)]
+        if len(rs) == 3:
+            R.check("t7.ranged_below_partition", f"{name}: after 1–3 bounces ranged is slower than partition "
+                    "(thesis table: ranged/partition 0.52–0.75)", all(r < 0.9 for r in rs),
+                    "ranged/partition " + ", ".join(f"{r:.2f}" for r in rs), variant)
+    # Not in the text, in the table: MBVH/RS falls below single-ray beyond bounce 1 on Modern Room,
+    # Sponza and Lucy, not on Conference and Soda Hall; checked against the same scene's thesis row.
+    for s in scenes_with("bounce"):
+        ts = THESIS_SCENE.get(s)
+        if not ts:
+            continue
+        get = next(g for n, g, _ in sources if n == s)
+        tget = thesis_getter(ts)
+        ours_below = [ratio(get, "mbvh_rs", d) < 1 for d in (2, 3)]
+        thesis_below = [ratio(tget, "mbvh_rs", d) < 1 for d in (2, 3)]
+        R.check("t7.rs_vs_single_deep", f"{s}: MBVH/RS is above/below single-ray at bounces 2 and 3 as in the thesis' row "
+                "of the same scene", ours_below == thesis_below,
+                f"ours mbvh_rs/single {ratio(get, 'mbvh_rs', 2):.2f}, {ratio(get, 'mbvh_rs', 3):.2f}; thesis "
+                f"{ratio(tget, 'mbvh_rs', 2):.2f}, {ratio(tget, 'mbvh_rs', 3):.2f}")
+    R.out()
+
+    R.out("## Table 8 — rays per visited node, of the 256-ray packet")
+    R.out("Thesis: Modern Room only (which we do not have). Ours: `rays_per_node`/`rays_per_leaf` of bounce.csv "
+          "(rays that intersect the node; `range_per_node` = ranged's range width, in CSVs made after the change).\n")
+    t8 = ref("table08_10_rays_per_node.csv")
+    body = []
+    for x in t8:
+        if x["table"] == "8":
+            body.append([f"thesis modern_room {x['scheme']} {x['node_kind']}"] + [x[f"depth{d}"] for d in range(4)])
+    for s in scenes_with("bounce"):
+        by = t7_rows(s)
+        new_counts = "range_per_node" in next(iter(by.values()))
+        for sc in ("bvh_partition", "bvh_ranged", "mbvh_rs"):
+            for kind, col in (("interior", "rays_per_node"), ("leaf", "rays_per_leaf")):
+                vals = [num(by[(sc, d)].get(col)) if (sc, d) in by else None for d in range(4)]
+                note = " (range width: this CSV predates counting the rays that intersect)" if sc == "bvh_ranged" and not new_counts else ""
+                body.append([f"{s} {sc} {kind}{note}"] + [f(v) for v in vals])
+            if "range_per_node" in next(iter(by.values())) and sc == "bvh_ranged":
+                body.append([f"{s} {sc} interior range width"] +
+                            [f(num(by[(sc, d)].get("range_per_node"))) if (sc, d) in by else "—" for d in range(4)])
+    R.out(md_table(["rows", "primary", "1st", "2nd", "3rd"], body))
+    R.out()
+    for s in scenes_with("bounce"):
+        by = t7_rows(s)
+        try:
+            rs = [num(by[("mbvh_rs", d)]["rays_per_node"]) for d in range(4)]
+            pa = [num(by[("bvh_partition", d)]["rays_per_node"]) for d in range(4)]
+            leaf = num(by[("bvh_partition", 3)]["rays_per_leaf"])
+        except KeyError:
+            continue
+        R.check("t8.rs_more_rays", f"{s}: MBVH/RS has more rays per interior node than ranged/partition at every depth "
+                "(“The MBVH/RS algorithm performs better”)", all(a > b for a, b in zip(rs, pa)),
+                "mbvh_rs " + ", ".join(f(v) for v in rs) + " vs partition " + ", ".join(f(v) for v in pa))
+        R.check("t8.drop", f"{s}: rays per node drop rapidly after one bounce (partition interior, depth 1 < 25% of "
+                "primary; thesis 9.7%)", pa[1] < 0.25 * pa[0], f"{pa[1]:.2f} of {pa[0]:.2f} ({100 * pa[1] / pa[0]:.1f}%)")
+        R.check("t8.leaf_to_one", f"{s}: after three bounces rays per leaf approach one (partition, < 2; thesis 1.30)",
+                leaf < 2, f"{leaf:.2f}", None if s in THESIS_SCENE else "nocounterpart")
+    R.out()
+
+
+def raygrid(R):
+    R.out("## Tables 9–10 — RayGrid vs single-ray MBVH and MBVH/RS (Mrays/s; rays per mini-MBVH node)")
+    R.out("Ours: `results/<scene>/raygrid.csv` (4-wide, M = 384 as the thesis; thesis values in parentheses "
+          "where the scene has a counterpart).\n")
+    for s in scenes_with("raygrid"):
+        rows = [r for r in ours(s, "raygrid") if r.get("part") == "table9"]
+        if not rows:
+            continue
+        by = {(r["scheme"], int(r["bounce"])): r for r in rows}
+        body = []
+        for sc in ("mbvh4_single", "mbvh_rs", "raygrid"):
+            body.append([sc] + [(f(num(by[(sc, k)]["mrays_median"])) + (f" ({by[(sc, k)]['thesis_mrays']})" if by[(sc, k)].get("thesis_mrays") else ""))
+                                if (sc, k) in by else "—" for k in range(1, 5)])
+        R.out(f"### {s}\n")
+        R.out(md_table(["scheme", "bounce 1", "2", "3", "4"], body))
+        R.out()
+        ks = [k for k in range(1, 5) if ("raygrid", k) in by and ("mbvh_rs", k) in by and ("mbvh4_single", k) in by]
+        g = lambda sc, k: num(by[(sc, k)]["mrays_median"])
+        R.check("t9.rg_beats_rs", f"{s}: RayGrid outperforms MBVH/RS at every bounce (“consistently outperforms”)",
+                all(g("raygrid", k) > g("mbvh_rs", k) for k in ks),
+                ", ".join(f"{k}: {g('raygrid', k) / g('mbvh_rs', k):.2f}x" for k in ks))
+        R.check("t9.rg_beats_single", f"{s}: RayGrid outperforms single-ray MBVH at every bounce",
+                all(g("raygrid", k) > g("mbvh4_single", k) for k in ks),
+                ", ".join(f"{k}: {g('raygrid', k) / g('mbvh4_single', k):.2f}x" for k in ks))
+        rk = [k for k in ks if num(by[("raygrid", k)].get("rays_per_node")) is not None]
+        R.check("t10.rg_more_rays", f"{s}: RayGrid's mini-MBVH nodes see more rays than MBVH/RS's nodes after primary "
+                "rays (Table 10 vs 8)", all(num(by[("raygrid", k)]["rays_per_node"]) > num(by[("mbvh_rs", k)]["rays_per_node"]) for k in rk),
+                ", ".join(f"{k}: {f(num(by[('raygrid', k)]['rays_per_node']))} vs {f(num(by[('mbvh_rs', k)]['rays_per_node']))}" for k in rk))
+        R.out()
+
+
+def cache(R):
+    R.out("## Table 11 — simulated cache behaviour, Conference, bounce 2")
+    t11 = {x["metric"]: x for x in ref("table11_cache_raygrid.csv")}
+    rows = ours("conference", "cache")
+    if not rows:
+        R.out("No results/conference/cache.csv.\n")
+        return
+    R.out("Ours: `results/conference/cache.csv` (counts in 10⁶; the thesis' in parentheses). The thesis' "
+          "caption says 10⁹ cycles, but its read counts times 4:11:39:107 give its cost row in 10⁶ cycles "
+          "(M = 64: 907.1·4 + 10.9·11 + 9.7·39 + 11.2·107 = 5,325.0 against the printed 5,328.8): read as 10⁶. "
+          "Ours: `read_cost_mcycles`, the same sum over our read counts.\n")
+    cols = [("raygrid M=64", "batch64"), ("raygrid M=128", "batch128"), ("raygrid M=256", "batch256"),
+            ("raygrid M=512", "batch512"), ("raygrid M=1024", "batch1024"), ("mbvh_rs", "mbvh_rs")]
+    by = {r["label"]: r for r in rows}
+    body = []
+    for metric, col in (("l1_read_hit", "l1_read_hit_m"), ("l2_read_hit", "l2_read_hit_m"), ("l3_read_hit", "l3_read_hit_m"),
+                        ("mem_read", "mem_read_m"), ("cost_est_gcycles", "read_cost_mcycles")):
+        line = [metric.replace("cost_est_gcycles", "read cost (est., 10⁶ cycles)")]
+        for label, tcol in cols:
+            r = by.get(label)
+            tv = t11.get(metric, {}).get(tcol, "")
+            line.append((f(num(r[col])) if r else "—") + (f" ({tv})" if tv else ""))
+        body.append(line)
+    R.out(md_table(["metric"] + [c[0] for c in cols], body))
+    R.out()
+    rg, rs = by.get("raygrid M=256") or by.get("raygrid M=128"), by.get("mbvh_rs")
+    if rg and rs:
+        R.check("t11.cost_rg_below_rs", "RayGrid's estimated memory cost is below MBVH/RS's (thesis: 5,235–6,168 vs 6,873)",
+                num(rg["read_cost_mcycles"]) < num(rs["read_cost_mcycles"]),
+                f"{rg['label']} {f(num(rg['read_cost_mcycles']), 1)} vs mbvh_rs {f(num(rs['read_cost_mcycles']), 1)}")
+        R.check("t11.l3_rg_below_rs", "RayGrid reads L3 less than MBVH/RS (“a significant reduction in L3 cache access”)",
+                num(rg["l3_read_hit_m"]) < num(rs["l3_read_hit_m"]),
+                f"{f(num(rg['l3_read_hit_m']), 3)} vs {f(num(rs['l3_read_hit_m']), 3)}")
+    R.out()
+
+
+def simt(R):
+    R.out("## Tables 12–13 — GPU divergence and utilization (SIMT warp model, not a GPU: docs/SIMT.md)")
+    t = {x["row"]: x for x in ref("table12_13_gpu_divergence_utilization.csv")}
+    col = {"sponza": "scene1", "sibenik_lucy": "scene3"}
+    for s in scenes_with("simt"):
+        rows = [r for r in ours(s, "simt") if r.get("loop") == "while_while"]
+        if not rows:
+            continue
+        by = {r["row"]: r for r in rows}
+        tc = col.get(s)
+        R.out(f"### {s}" + ("" if tc else " (no thesis counterpart)") + "\n")
+        R.out(md_table(["row", "model Mrays/s", "% of base", "thesis Mrays/s", "thesis %"],
+                       [[k, f(num(r["model_mrays"]), 1), f(num(r["model_pct_of_base"]), 1),
+                         t[k][tc] if tc and k in t else "", r.get("thesis_pct_of_base", "")] for k, r in by.items()]))
+        R.out()
+        p = lambda k: num(by[k]["model_pct_of_base"]) if k in by else None
+        nc = None if tc else "nocounterpart"
+        if p("D=8") is not None:
+            R.check("t12.d8_94", f"{s}: at D = 8 the GPU keeps > 94% of D = 1", p("D=8") > 94, f"{p('D=8'):.1f}%", nc)
+        if p("D=32") is not None:
+            R.check("t12.d32_70", f"{s}: at D = 32 still ≈ 70% (≥ 69%)", p("D=32") >= 69, f"{p('D=32'):.1f}%", nc)
+        if p("rnd") is not None:
+            R.check("t12.rnd_50", f"{s}: rnd does not drop below 50%", p("rnd") >= 50, f"{p('rnd'):.1f}%", nc)
+        if p("rnd2") is not None:
+            R.check("t12.rnd2_38", f"{s}: rnd2 at least 38%", p("rnd2") >= 38, f"{p('rnd2'):.1f}%", nc)
+        if "O=32" in by and "O=1" in by:
+            x = num(by["O=32"]["model_mrays"]) / num(by["O=1"]["model_mrays"])
+            R.check("t13.o32", f"{s}: 32 active lanes give 7.3–8.1x one lane (Table 13)", 7.2 <= x <= 8.2, f"{x:.1f}x")
+        R.out()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=os.path.join(RESULTS, "THESIS.md"))
+    a = ap.parse_args()
+    R = Report()
+    for part in (table1, divergence, bounce, raygrid, cache, simt):
+        part(R)
+    n_ok = sum(1 for ok, _ in R.checks if ok)
+    n_bad = len(R.checks) - n_ok
+    unexplained = sum(1 for ok, why in R.checks if not ok and why.startswith(UNEXPLAINED))
+    head = ["# The thesis' tables and claims, checked against ours", "",
+            "Generated by `/usr/bin/python3 scripts/thesis_report.py` from the committed CSVs in `results/` and the "
+            "thesis tables in `../shared/reference/` — do not edit by hand. Thesis: J. Bikker, *Ray Tracing in "
+            "Real-time Games*, 2012. Hardware differs (thesis: 3.4/3.8 GHz Xeon cores, a GTX470; ours: a 2-core "
+            "AMD EPYC VM, README of results/), so absolute Mrays/s are not expected to agree; orderings and ratios are "
+            "the claims. Every ✗ carries its cause (a measurement or a document) or says “unexplained”.", "",
+            f"**{len(R.checks)} checks: {n_ok} ✓, {n_bad} ✗ ({unexplained} of them unexplained).**", ""]
+    with open(a.out, "w") as fo:
+        fo.write("\n".join(head + R.lines) + "\n")
+    print(f"wrote {a.out}: {len(R.checks)} checks, {n_ok} ok, {n_bad} failed, {unexplained} unexplained")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
