@@ -374,6 +374,28 @@ TEST(ExactOracle, TJunctionSeamIsAmbiguousSharedEdgeIsNot) {
   }
 }
 
+// Sponza's corner under the roof (rnd2, 1280x800, ray 735497): the wall 63985 (z = 3.18149, up to
+// y = 15.6533) meets the ceiling 13878 (y = 15.6533) along one line, but their edges on it end at
+// different points (x = 11.5872 and 11.6672): they share only the vertex at x = 0.00724, far from
+// where the ray crosses (x = 4.85). The exact ray hits the wall 0.14 float ulps of y below the
+// corner; every float kernel passes between the two edge functions and misses. A vertex shared far
+// from the crossing does not tie the two (the seam rule), so the miss is ambiguous; with a ceiling
+// that shares the wall's whole edge the same miss is a leak.
+TEST(ExactOracle, CornerSeamTiedOnlyByAFarVertexIsAmbiguous) {
+  const Vec3 w0{6.78724f, 15.0633f, 3.18149f}, w1{11.5872f, 15.6533f, 3.18149f}, w2{0.00724f, 15.6533f, 3.18149f};
+  const Vec3 ledge[3] = {{0.00724f, 15.6533f, 2.52149f}, w2, w1};
+  const Ray r = ray({3.925013780593872f, 15.094970703125f, 3.738776206970215f},
+                    {0.761491596698761f, 0.4587571918964386f, -0.4579000473022461f});
+  for (const bool tjunction : {true, false}) {
+    const Vec3 c2 = tjunction ? Vec3{11.6672f, 15.6533f, 3.18149f} : w1;  // the ceiling's far end on the line
+    const Checked c(mesh({w0, w1, w2, ledge[0], ledge[1], ledge[2], w2, {0.00724f, 15.6533f, 7.80149f}, c2},
+                         {{0, 1, 2}, {3, 4, 5}, {6, 7, 8}}));
+    const Hit h = c.trace(r);
+    ASSERT_EQ(h.prim, 0u) << "the exact ray hits the wall";
+    EXPECT_EQ(c.oracle.ambiguous(r, Hit{}, kDistanceBar), tjunction) << (tjunction ? "T-junction" : "shared edge");
+  }
+}
+
 // ---- hard-case workloads of the built-in scenes ------------------------------------------------
 
 const std::vector<std::string> kHardScenes = {"room", "stadium", "sphere", "sphere@148376,1234,-223423",

@@ -487,6 +487,21 @@ bool lands_untied(const BVH& bvh, const Scene& scene, const std::vector<uint32_t
   std::map<std::array<uint32_t, 3>, std::vector<size_t>> at_vertex;
   for (size_t i = 0; i < nodes.size(); ++i)
     for (int v = 0; v < 3; ++v) at_vertex[key(scene.vertex(nodes[i], v))].push_back(i);
+  // Closure around a shared vertex holds only for rays that pass near it: two triangles are tied
+  // through a vertex they share only when that vertex lies in the box of the crossings, and
+  // anywhere through an edge they share (both vertices). Two edges on one line with one common
+  // end — a T-junction along a corner, Sponza's wall 63985 and ceiling 13878 — are independent
+  // edge functions away from that end.
+  auto in_box = [&](Vec3 v) {
+    for (int a = 0; a < 3; ++a)
+      if (double(v[a]) < lo[a] || double(v[a]) > hi[a]) return false;
+    return true;
+  };
+  auto has_vertex = [&](size_t j, const std::array<uint32_t, 3>& k) {
+    for (int w = 0; w < 3; ++w)
+      if (key(scene.vertex(nodes[j], w)) == k) return true;
+    return false;
+  };
   std::vector<char> tied(nodes.size(), 0);
   std::vector<size_t> todo;
   for (size_t i = 0; i < nodes.size(); ++i)
@@ -494,9 +509,13 @@ bool lands_untied(const BVH& bvh, const Scene& scene, const std::vector<uint32_t
   while (!todo.empty()) {
     const size_t i = todo.back();
     todo.pop_back();
-    for (int v = 0; v < 3; ++v)
-      for (size_t j : at_vertex[key(scene.vertex(nodes[i], v))])
-        if (!tied[j]) tied[j] = 1, todo.push_back(j);
+    for (int v = 0; v < 3; ++v) {
+      const Vec3 p = scene.vertex(nodes[i], v);
+      const bool near = in_box(p);
+      const auto k1 = key(scene.vertex(nodes[i], (v + 1) % 3));
+      for (size_t j : at_vertex[key(p)])
+        if (!tied[j] && (near || has_vertex(j, k1))) tied[j] = 1, todo.push_back(j);
+    }
   }
   for (uint32_t p : landed)
     if (!tied[size_t(std::lower_bound(nodes.begin(), nodes.end(), p) - nodes.begin())]) return true;
