@@ -330,7 +330,7 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
           const PairRay pr = pair_ray(v, list[i], list[i + 1]);
           Hit* h[2] = {&v.hits[list[i]], &v.hits[list[i + 1]]};
           for (uint32_t k = 0; k < nblocks; ++k)
-            pair_intersect(pr, blocks[first + k], h, lane_bits(std::min<uint32_t>(4, ntris - 4 * k)));
+            pair_intersect(pr, blocks[first + k], h, lane_bits(block_tris<4>(ntris, k)));
         }
       }
       for (; i < t.count; ++i) {

@@ -138,7 +138,10 @@ struct TriRay {
   }
 };
 
-// The low n bits set: a block's real lanes.
+// The real triangles of block k of a leaf of ntris triangles in W-wide blocks (the last block pads
+// with copies of the leaf's last triangle), and the low n bits set: those lanes.
+template <int W>
+constexpr uint32_t block_tris(uint32_t ntris, uint32_t k) { return std::min<uint32_t>(W, ntris - k * W); }
 constexpr uint32_t lane_bits(uint32_t n) { return (1u << n) - 1; }
 
 // The watertight test of the kernel library on W triangles at once (one ray, W lanes): the same
@@ -203,9 +206,9 @@ inline void leaf_test(const TriBlock<W>* blocks, const TriangleSet* ts, const Tr
   const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
   for (uint32_t k = 0; k * W < ntris; ++k) {
     if constexpr (K == TriKernel::watertight) {
-      block_intersect<W>(tr, blocks[first + k], hit, lane_bits(std::min<uint32_t>(W, ntris - k * W)));
+      block_intersect<W>(tr, blocks[first + k], hit, lane_bits(block_tris<W>(ntris, k)));
     } else {
-      const uint32_t lanes = std::min<uint32_t>(W, ntris - k * W);
+      const uint32_t lanes = block_tris<W>(ntris, k);
       for (uint32_t l = 0; l < lanes; ++l) intersect_tri<K>(*rc, *ts, (first + k) * W + l, tr.tmin, hit);
     }
   }
@@ -219,7 +222,7 @@ inline void probe_leaf(const TriBlock<W>* blocks, uint32_t ref, P& probe, uint32
     const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
     probe.leaf(&blocks[first], 0, active);
     for (uint32_t k = 0; k * W < ntris; ++k)
-      probe.tris(&blocks[first + k], sizeof(TriBlock<W>), std::min<uint32_t>(W, ntris - k * W) * active);
+      probe.tris(&blocks[first + k], sizeof(TriBlock<W>), block_tris<W>(ntris, k) * active);
   }
 }
 // The same on an MBVH, whose small leaves (8-wide layout, <= 4 triangles) sit in 4-wide blocks.
