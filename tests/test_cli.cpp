@@ -251,14 +251,21 @@ TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
   std::filesystem::remove_all(dir);
 }
 
+// The command exited with `code` and its output says `needle`.
+void expect_says(const Result& r, int code, const std::string& needle) {
+  EXPECT_EQ(r.code, code) << r.out;
+  EXPECT_NE(r.out.find(needle), std::string::npos) << r.out;
+}
+
 // A table streams its measured cells too: killed after the first, its CSV holds whole rows under
-// one header and the sidecar says the table did not finish.
-TEST(CLI, KilledTableKeepsItsCells) {
+// one header and the sidecar says the table did not finish; `table --resume` completes it with
+// the rows (and no duplicate) of an uninterrupted table, refuses other settings naming the one
+// that differs, and has nothing to do for a finished table. Tables that do not stream refuse it.
+TEST(CLI, KilledTableKeepsItsCellsAndResumeCompletesIt) {
   const auto dir = test::temp_dir("cli_table_kill");
-  const std::string csv = (dir / "b.csv").string();
-  ASSERT_TRUE(killed_after_first_row("table bounce --scene sphere --schemes bvh_single,mbvh8_single --width 64 "
-                                     "--height 64 --reps 20 --csv " + csv, csv))
-      << "the table ended before the kill";
+  const std::string csv = (dir / "b.csv").string(), full = (dir / "full.csv").string();
+  const std::string table = "table bounce --scene sphere --schemes bvh_single,mbvh8_single --width 64 --height 64 --csv ";
+  ASSERT_TRUE(killed_after_first_row(table + csv + " --reps 20", csv)) << "the table ended before the kill";
   const std::vector<std::string> lines = lines_of(csv);
   ASSERT_GE(lines.size(), 2u);
   EXPECT_LT(lines.size(), 9u);
@@ -271,6 +278,26 @@ TEST(CLI, KilledTableKeepsItsCells) {
   const Result bad = travbench("table bounce --scene sphere --param bogus=1 --csv " + csv);
   EXPECT_EQ(bad.code, 2) << bad.out;
   EXPECT_EQ(lines_of(csv), lines);
+  const std::set<std::string> kept = cells_of(csv);
+
+  expect_says(travbench(table + csv + " --reps 2 --resume"), 2, "sweep.reps 20, this sweep has 2");
+  EXPECT_EQ(lines_of(csv), lines);
+  const Result resumed = travbench(table + csv + " --reps 20 --resume");
+  ASSERT_EQ(resumed.code, 0) << resumed.out;
+  EXPECT_NE(resumed.out.find("resuming, " + std::to_string(kept.size()) + " cells there already"), std::string::npos)
+      << resumed.out;
+  ASSERT_EQ(travbench(table + full + " --reps 1").code, 0);
+  const std::set<std::string> done = cells_of(csv);
+  EXPECT_EQ(done, cells_of(full));
+  EXPECT_EQ(lines_of(csv).size(), lines_of(full).size());
+  EXPECT_EQ(lines_of(csv)[0], lines_of(full)[0]) << "the finished table's columns";
+  for (const auto& c : kept) EXPECT_TRUE(done.count(c)) << c;
+  // Finished: nothing to resume, the files stay as they are.
+  const std::vector<std::string> finished = lines_of(csv);
+  expect_says(travbench(table + csv + " --reps 20 --resume"), 0, "nothing to resume");
+  EXPECT_EQ(lines_of(csv), finished);
+  expect_says(travbench(table + csv + " --reps 3 --resume"), 2, "sweep.reps");
+  expect_says(travbench("table build --scene sphere --reps 1 --resume --csv " + (dir / "build.csv").string()), 2, "--resume is not available");
   std::filesystem::remove_all(dir);
 }
 
