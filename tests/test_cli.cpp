@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "harness/sweep.h"
 #include "test_util.h"
 
 namespace tb {
@@ -298,6 +299,45 @@ TEST(CLI, KilledTableKeepsItsCellsAndResumeCompletesIt) {
   EXPECT_EQ(lines_of(csv), finished);
   expect_says(travbench(table + csv + " --reps 3 --resume"), 2, "sweep.reps");
   expect_says(travbench("table build --scene sphere --reps 1 --resume --csv " + (dir / "build.csv").string()), 2, "--resume is not available");
+  std::filesystem::remove_all(dir);
+}
+
+// The pieces of `table --resume` below the CLI: kept rows are replayed in order and each must be
+// the table's cell at its place; a scene of the same name but other content is refused.
+TEST(CellStream, TableReplayChecksCellOrderAndSceneContent) {
+  const auto dir = test::temp_dir("cellstream_replay");
+  const std::string csv = (dir / "t.csv").string();
+  const nlohmann::json meta = {{"command", "table test"}};
+  const Scene scene = load_scene("sphere");
+  auto cell = [&](const char* workload) {
+    Record r;
+    r.set("scene", scene.name).set("workload", workload).set("scheme", "bvh_single").set("mrays_median", 1.5);
+    return r;
+  };
+  {
+    CellStream s(csv, meta, false, {"command"});
+    s.check_scene(scene);
+    s.append(cell("primary"));
+    s.append(cell("shadow"));
+  }  // "killed": never finished
+  {
+    CellStream s(csv, meta, true, {"command"});
+    EXPECT_EQ(s.resumed(), 2u);
+    s.check_scene(scene);
+    const Record* first = s.replay(scene.name, "primary", "bvh_single");
+    ASSERT_NE(first, nullptr);
+    EXPECT_EQ(*first->get("mrays_median"), "1.5");
+    EXPECT_NE(s.replay(scene.name, "shadow", "bvh_single"), nullptr);
+    EXPECT_EQ(s.replay(scene.name, "rnd", "bvh_single"), nullptr);  // used up: measure it
+  }
+  {
+    CellStream s(csv, meta, true, {"command"});
+    EXPECT_THROW(s.replay(scene.name, "shadow", "bvh_single"), InputError);  // the table's cells changed
+    Scene moved = scene;
+    moved.positions[0].x += 1;
+    EXPECT_THROW(s.check_scene(moved), InputError);
+  }
+  EXPECT_THROW(CellStream(csv, {{"command", "table other"}}, true, {"command"}), InputError);
   std::filesystem::remove_all(dir);
 }
 
