@@ -260,7 +260,8 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
   }
   // Only a median over many cells estimates the noise (most cells unchanged); a handful of cells,
   // one of them changed, would look "noisy" themselves.
-  res.noisy = opt.min_effect_pct > 0 && scatter.size() >= kMinCellsForNoise && res.scatter_pct >= opt.min_effect_pct / 2;
+  res.noisy = opt.min_effect_pct > 0 && scatter.size() >= kMinCellsForNoise &&
+              res.scatter_pct >= opt.min_effect_pct / 2;
   // The correction runs over every tested cell of the comparison: the family is what one look at
   // the output can flag.
   std::vector<double> ps;
@@ -293,7 +294,8 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
       }
     }
     if (opt.fail_on_regression_pct >= 0 && c.ratio < 1.0 - opt.fail_on_regression_pct / 100.0)
-      c.regression = c.verdict == "n/a" || c.verdict == "slower" || c.verdict == "noise";  // a gate passes only what it could judge
+      // A gate passes only what it could judge: no samples or too noisy a pair count too.
+      c.regression = c.verdict == "n/a" || c.verdict == "slower" || c.verdict == "noise";
     res.failed = res.failed || c.regression;
   }
   for (const auto& key : ni.order)

@@ -298,7 +298,8 @@ TEST(CLI, KilledTableKeepsItsCellsAndResumeCompletesIt) {
   expect_says(travbench(table + csv + " --reps 20 --resume"), 0, "nothing to resume");
   EXPECT_EQ(lines_of(csv), finished);
   expect_says(travbench(table + csv + " --reps 3 --resume"), 2, "sweep.reps");
-  expect_says(travbench("table build --scene sphere --reps 1 --resume --csv " + (dir / "build.csv").string()), 2, "--resume is not available");
+  expect_says(travbench("table build --scene sphere --reps 1 --resume --csv " + (dir / "build.csv").string()), 2,
+              "--resume is not available");
   std::filesystem::remove_all(dir);
 }
 

@@ -135,7 +135,8 @@ TEST(Compare, SameBinaryMarksNothingAndATwentyPercentSlowerSchemeIsMarked) {
   // (even corrected) cries wolf.
   CompareOptions raw;
   raw.min_effect_pct = 0;
-  EXPECT_GT(compare_runs(base, read_csv(suite_csv("s_same.csv", schemes, reps, 0.96, 2)), raw).slower, size_t(schemes * 4));
+  EXPECT_GT(compare_runs(base, read_csv(suite_csv("s_same.csv", schemes, reps, 0.96, 2)), raw).slower,
+            size_t(schemes * 4));
   // Chance alone (no drift): the correction keeps it quiet too, without any effect threshold.
   const CompareResult chance = compare_runs(base, read_csv(suite_csv("s_noise.csv", schemes, reps, 1.0, 3)), raw);
   EXPECT_EQ(chance.slower + chance.faster, 0u);
