@@ -248,11 +248,11 @@ int main(int argc, char** argv) {
   compare->add_option("--alpha", co.alpha, "false discovery rate of the U tests (Benjamini-Hochberg over the cells)")
       ->check(CLI::Range(1e-6, 0.5));
   compare->add_option("--min-effect", co.min_effect_pct,
-                      "a cell is faster/slower only when its ratio differs from 1 by at least PCT percent (default: "
-                      "above this machine's run-to-run drift, README)")
+                      "a cell is faster/slower only when its ratio differs from 1 by at least PCT percent (default 10: "
+                      "twice the drift between runs of one binary on a quiet machine, README; 0: off)")
       ->check(CLI::Range(0.0, 100.0));
   compare->add_option("--fail-on-regression", co.fail_on_regression_pct,
-                      "exit 3 when a cell is slower (verdict) by more than PCT percent")
+                      "exit 3 when a cell is slower by more than PCT percent (or beyond it without a verdict)")
       ->check(CLI::Range(0.0, 100.0));
   compare->add_option("--csv", compare_csv, "also write the comparison as CSV")->check(kOutputFile);
 
