@@ -197,6 +197,8 @@ int main(int argc, char** argv) {
   add_common(table);
   table->get_option("--scene")->required(false);
   table->get_option("--csv")->required();
+  table->add_flag("--resume", resume,
+                  "keep the cells --csv holds from an interrupted table of the same settings and measure only the rest");
 
   std::string rays_out, workload_arg;
   auto* rays = app.add_subcommand("rays", "Generate a workload and write it as a ray file");
@@ -243,9 +245,14 @@ int main(int argc, char** argv) {
       "compare", "Compare two run CSVs cell by cell: speed ratio, Mann-Whitney U over the repetitions, accuracy deltas");
   compare->add_option("base", base_csv, "the baseline run CSV")->required()->check(CLI::ExistingFile);
   compare->add_option("new", new_csv, "the new run CSV")->required()->check(CLI::ExistingFile);
-  compare->add_option("--alpha", co.alpha, "significance level of the U test")->check(CLI::Range(1e-6, 0.5));
+  compare->add_option("--alpha", co.alpha, "false discovery rate of the U tests (Benjamini-Hochberg over the cells)")
+      ->check(CLI::Range(1e-6, 0.5));
+  compare->add_option("--min-effect", co.min_effect_pct,
+                      "a cell is faster/slower only when its ratio differs from 1 by at least PCT percent (default 10: "
+                      "twice the drift between runs of one binary on a quiet machine, README; 0: off)")
+      ->check(CLI::Range(0.0, 100.0));
   compare->add_option("--fail-on-regression", co.fail_on_regression_pct,
-                      "exit 3 when a cell is significantly slower by more than PCT percent")
+                      "exit 3 when a cell is slower by more than PCT percent (or beyond it without a verdict)")
       ->check(CLI::Range(0.0, 100.0));
   compare->add_option("--csv", compare_csv, "also write the comparison as CSV")->check(kOutputFile);
 
@@ -291,6 +298,7 @@ int main(int argc, char** argv) {
       to.run.schemes = schemes_arg == "all" ? std::vector<std::string>{} : expand_scheme_list(schemes_arg);
       to.csv = csv_path;
       to.width_given = table->count("--width") > 0, to.height_given = table->count("--height") > 0;
+      to.resume = resume;
       return run_table(table_name, to);
     }
     Scene scene;

@@ -132,6 +132,20 @@ std::optional<double> mann_whitney_p(const std::vector<double>& a, const std::ve
   return std::min(1.0, std::erfc(z / std::sqrt(2.0)));
 }
 
+std::vector<double> benjamini_hochberg(const std::vector<double>& p) {
+  const size_t m = p.size();
+  std::vector<size_t> order(m);
+  for (size_t i = 0; i < m; ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return p[a] < p[b]; });
+  std::vector<double> q(m);
+  double running = 1.0;  // the minimum over j >= i, walking down from the largest p
+  for (size_t r = m; r-- > 0;) {
+    running = std::min(running, p[order[r]] * double(m) / double(r + 1));
+    q[order[r]] = std::min(1.0, running);
+  }
+  return q;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Matching and comparing cells
 
@@ -225,16 +239,7 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
       c.next_samples = b.size();
       c.p = mann_whitney_p(b, a);
     }
-    if (!c.p || c.base_samples < 2 || c.next_samples < 2) {
-      c.verdict = "n/a";
-      res.untested++;
-    } else if (*c.p < opt.alpha) {
-      c.verdict = c.ratio >= 1 ? "faster" : "slower";
-      (c.ratio >= 1 ? res.faster : res.slower)++;
-    } else {
-      c.verdict = "same";
-      res.same++;
-    }
+    if (!c.p || c.base_samples < 2 || c.next_samples < 2) c.p.reset();  // too few to test
     for (const char* col : kAccuracyColumns) {
       const int bc = base.column(col), nc = next.column(col);
       if (bc < 0 && nc < 0) continue;
@@ -242,26 +247,71 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
       const double nv = nc >= 0 && !next.at(nr, nc).empty() ? number(next, nr, nc, col) : 0;
       c.accuracy_delta.emplace_back(col, nv - bv);
     }
-    if (opt.fail_on_regression_pct >= 0 && c.ratio < 1.0 - opt.fail_on_regression_pct / 100.0)
-      c.regression = c.verdict == "n/a" || c.verdict == "slower";
-    res.failed = res.failed || c.regression;
     if (c.ratio > 0) log_sum += std::log(c.ratio);
     res.cells.push_back(std::move(c));
   }
+  res.geomean_ratio = res.cells.empty() ? 0 : std::exp(log_sum / double(res.cells.size()));
+  std::vector<double> scatter;
+  for (const auto& c : res.cells)
+    if (res.geomean_ratio > 0) scatter.push_back(std::fabs(c.ratio / res.geomean_ratio - 1.0) * 100.0);
+  if (!scatter.empty()) {
+    std::nth_element(scatter.begin(), scatter.begin() + std::ptrdiff_t(scatter.size() / 2), scatter.end());
+    res.scatter_pct = scatter[scatter.size() / 2];
+  }
+  // Only a median over many cells estimates the noise (most cells unchanged); a handful of cells,
+  // one of them changed, would look "noisy" themselves.
+  res.noisy = opt.min_effect_pct > 0 && scatter.size() >= kMinCellsForNoise &&
+              res.scatter_pct >= opt.min_effect_pct / 2;
+  // The correction runs over every tested cell of the comparison: the family is what one look at
+  // the output can flag.
+  std::vector<double> ps;
+  for (const auto& c : res.cells)
+    if (c.p) ps.push_back(*c.p);
+  const std::vector<double> qs = benjamini_hochberg(ps);
+  res.min_attainable_p = 1;
+  size_t k = 0;
+  for (auto& c : res.cells) {
+    if (!c.p) {
+      c.verdict = "n/a";
+      res.untested++;
+    } else {
+      c.q = qs[k++];
+      // Fully separated samples of these sizes: the smallest p the test can give them.
+      std::vector<double> lo(c.base_samples), hi(c.next_samples);
+      for (size_t i = 0; i < lo.size(); ++i) lo[i] = double(i);
+      for (size_t i = 0; i < hi.size(); ++i) hi[i] = double(lo.size() + i);
+      res.min_attainable_p = std::min(res.min_attainable_p, *mann_whitney_p(hi, lo));
+      const bool big = std::fabs(c.ratio - 1.0) * 100.0 >= opt.min_effect_pct;
+      if (*c.q < opt.alpha && big && res.noisy) {
+        c.verdict = "noise";
+        res.withheld++;
+      } else if (*c.q < opt.alpha && big) {
+        c.verdict = c.ratio >= 1 ? "faster" : "slower";
+        (c.ratio >= 1 ? res.faster : res.slower)++;
+      } else {
+        c.verdict = "same";
+        res.same++;
+      }
+    }
+    if (opt.fail_on_regression_pct >= 0 && c.ratio < 1.0 - opt.fail_on_regression_pct / 100.0)
+      // A gate passes only what it could judge: no samples or too noisy a pair count too.
+      c.regression = c.verdict == "n/a" || c.verdict == "slower" || c.verdict == "noise";
+    res.failed = res.failed || c.regression;
+  }
   for (const auto& key : ni.order)
     if (!bi.row.count(key)) res.only_next.push_back(key);
-  res.geomean_ratio = res.cells.empty() ? 0 : std::exp(log_sum / double(res.cells.size()));
   return res;
 }
 
 void print_comparison(const CompareResult& r, const CompareOptions& opt, FILE* out) {
   size_t w = 4;
   for (const auto& c : r.cells) w = std::max(w, c.key.size());
-  std::fprintf(out, "%-*s %10s %10s %7s %8s  %-7s %s\n", int(w), "cell", "base", "new", "ratio", "p", "verdict",
-               "accuracy change (new - base)");
+  std::fprintf(out, "%-*s %10s %10s %7s %8s %8s  %-7s %s\n", int(w), "cell", "base", "new", "ratio", "p", "q",
+               "verdict", "accuracy change (new - base)");
   for (const auto& c : r.cells) {
-    char p[16] = "-";
+    char p[16] = "-", q[16] = "-";
     if (c.p) std::snprintf(p, sizeof p, "%.3g", *c.p);
+    if (c.q) std::snprintf(q, sizeof q, "%.3g", *c.q);
     std::string acc;
     for (const auto& [col, d] : c.accuracy_delta)
       if (d != 0) {
@@ -269,16 +319,39 @@ void print_comparison(const CompareResult& r, const CompareOptions& opt, FILE* o
         std::snprintf(buf, sizeof buf, "%s%s %+g", acc.empty() ? "" : ", ", col.c_str(), d);
         acc += buf;
       }
-    std::fprintf(out, "%-*s %10.4g %10.4g %6.3fx %8s  %-7s %s%s\n", int(w), c.key.c_str(), c.base, c.next, c.ratio, p,
-                 c.verdict.c_str(), acc.empty() ? "-" : acc.c_str(), c.regression ? "  REGRESSION" : "");
+    std::fprintf(out, "%-*s %10.4g %10.4g %6.3fx %8s %8s  %-7s %s%s\n", int(w), c.key.c_str(), c.base, c.next, c.ratio,
+                 p, q, c.verdict.c_str(), acc.empty() ? "-" : acc.c_str(), c.regression ? "  REGRESSION" : "");
   }
   for (const auto& k : r.only_base) std::fprintf(out, "only in base: %s\n", k.c_str());
   for (const auto& k : r.only_next) std::fprintf(out, "only in new:  %s\n", k.c_str());
+  const size_t tested = r.cells.size() - r.untested;
   std::fprintf(out,
-               "summary: %zu matched cells, geometric mean ratio %.3fx; %zu faster, %zu slower, %zu same "
-               "(Mann-Whitney U, two-sided, alpha %.2g), %zu without samples; %zu only in base, %zu only in new\n",
-               r.cells.size(), r.geomean_ratio, r.faster, r.slower, r.same, opt.alpha, r.untested, r.only_base.size(),
-               r.only_next.size());
+               "summary: %zu matched cells, geometric mean ratio %.3fx; %zu faster, %zu slower, %zu same, %zu noise, %zu "
+               "without samples; %zu only in base, %zu only in new. A verdict needs q < %.3g (Mann-Whitney U, two-sided, "
+               "Benjamini-Hochberg over %zu tested cells) and a change of at least %.3g%% (--min-effect)\n",
+               r.cells.size(), r.geomean_ratio, r.faster, r.slower, r.same, r.withheld, r.untested, r.only_base.size(),
+               r.only_next.size(), opt.alpha, tested, opt.min_effect_pct);
+  if (r.noisy)
+    std::fprintf(out,
+                 "warning: the cells scatter by %.3g%% around the common change (median |ratio / geomean - 1|), at "
+                 "least half of --min-effect %.3g%%: that is the noise of these two runs (a busy machine), so no "
+                 "cell gets a verdict (%zu would have: 'noise'); re-run both on a quiet machine "
+                 "(scripts/ab_compare.py interleaves runs)\n",
+                 r.scatter_pct, opt.min_effect_pct, r.withheld);
+  // A single changed cell passes the correction only with p <= alpha / tested; say so when the
+  // repetitions cannot give that (5 a side: p >= 0.0079), and how many would.
+  if (tested > 0 && r.min_attainable_p > opt.alpha / double(tested)) {
+    size_t n = 2;
+    double ways = 6;  // C(2n, n): the exact two-sided minimum with n a side is 2 / C(2n, n)
+    while (n < 64 && 2.0 / ways > opt.alpha / double(tested)) {
+      ways *= double(2 * n + 1) * double(2 * n + 2) / double((n + 1) * (n + 1));
+      ++n;
+    }
+    std::fprintf(out,
+                 "note: these samples give p >= %.2g, so one changed cell alone cannot pass the correction over %zu "
+                 "cells (it needs p <= %.2g; a change shared by many cells can): use --reps %zu or more\n",
+                 r.min_attainable_p, tested, opt.alpha / double(tested), n);
+  }
   if (opt.fail_on_regression_pct >= 0)
     std::fprintf(out, "%s: %s regression beyond %.3g%%\n", r.failed ? "FAIL" : "ok", r.failed ? "a" : "no",
                  opt.fail_on_regression_pct);
@@ -291,6 +364,7 @@ std::vector<Record> comparison_records(const CompareResult& r) {
     for (const auto& [k, v] : c.id) rec.set(k, v);
     rec.set("status", "matched").set("base_mrays", c.base).set("new_mrays", c.next).set("ratio", c.ratio);
     rec.set("p_value", c.p ? std::to_string(*c.p) : std::string());
+    rec.set("q_value", c.q ? std::to_string(*c.q) : std::string());
     rec.set("base_samples", uint64_t(c.base_samples)).set("new_samples", uint64_t(c.next_samples));
     rec.set("verdict", c.verdict).set("regression", c.regression ? 1 : 0);
     for (const auto& [col, d] : c.accuracy_delta) rec.set("delta_" + col, d);

@@ -5,6 +5,13 @@
 // the per-repetition samples (column `mrays_samples`, as Google Benchmark's compare.py tests its
 // repetitions) and the change of every accuracy column (leaks, false hits, wrong_t, ...). Cells in
 // only one file are listed, never dropped. Summary: geometric mean of the ratios.
+//
+// Not crying wolf: with dozens of cells a per-cell p < alpha flags about alpha of them on identical
+// binaries by chance, and run-to-run drift of a shared machine (a few percent, the same for every
+// sample of one run, so not i.i.d.) makes every sample of one run faster than every sample of the
+// other, which the U test calls significant. So a cell is "faster" or "slower" only when both hold:
+// its p-value survives the Benjamini-Hochberg correction over all tested cells (q < alpha), and
+// its ratio differs from 1 by at least --min-effect percent (README, "compare").
 #pragma once
 #include <cstdio>
 #include <map>
@@ -32,10 +39,24 @@ CsvTable read_csv(const std::string& path);  // throws InputError naming the fil
 // mannwhitneyu. Returns nullopt when a sample is empty.
 std::optional<double> mann_whitney_p(const std::vector<double>& a, const std::vector<double>& b);
 
+// Benjamini-Hochberg adjusted p-values (q-values, Benjamini & Hochberg 1995): q_(i) =
+// min over j >= i of p_(j) * m / j for the ascending p_(1..m), capped at 1; q < alpha keeps the
+// expected share of false discoveries below alpha (and, when no cell changed, the chance of any).
+std::vector<double> benjamini_hochberg(const std::vector<double>& p);
+
+// The default --min-effect in percent: above the largest drift measured between two runs of the
+// same binary on this machine (README, "compare").
+inline constexpr double kDefaultMinEffectPct = 10.0;
+
+// Below this many matched cells the scatter is not taken as the runs' noise (CompareResult).
+inline constexpr size_t kMinCellsForNoise = 10;
+
 struct CompareOptions {
-  double alpha = 0.05;  // significance level of the U test
+  double alpha = 0.05;  // false discovery rate of the corrected U tests
+  double min_effect_pct = kDefaultMinEffectPct;  // |ratio - 1| a verdict needs, percent
   // >= 0: the comparison fails when a matched cell is slower by more than this many percent and
-  // the slowdown is significant (or, without samples, by the ratio alone).
+  // the slowdown is significant (or, without samples, by the ratio alone, or the runs too noisy to
+  // judge it: verdict "noise").
   double fail_on_regression_pct = -1;
 };
 
@@ -44,8 +65,9 @@ struct CellComparison {
   std::vector<std::pair<std::string, std::string>> id;  // the identifying columns
   double base = 0, next = 0, ratio = 0;  // Mrays/s medians and next / base
   std::optional<double> p;               // U-test p-value; nullopt without samples
+  std::optional<double> q;               // p adjusted by Benjamini-Hochberg over the tested cells
   size_t base_samples = 0, next_samples = 0;
-  std::string verdict;                   // faster | slower | same | n/a (not tested)
+  std::string verdict;                   // faster | slower | same | noise | n/a (not tested)
   std::vector<std::pair<std::string, double>> accuracy_delta;  // column -> next - base
   bool regression = false;
 };
@@ -55,6 +77,17 @@ struct CompareResult {
   std::vector<std::string> only_base, only_next;  // unmatched cells
   double geomean_ratio = 0;
   size_t faster = 0, slower = 0, same = 0, untested = 0;
+  // The smallest p-value the tested cells' sample sizes allow (exact U null: 2 / C(n1+n2, n1)):
+  // above alpha / tested, not even one changed cell alone could pass the correction.
+  double min_attainable_p = 0;
+  // How far the cells scatter around the common change: the median over the matched cells of
+  // |ratio / geomean_ratio - 1|, percent. A change of the code moves the cells it touches and
+  // leaves the rest; a busy machine scatters every cell (two runs of one binary on the shared
+  // 2-core VM under load: ~20%, README). At half of --min-effect or more (`noisy`) unchanged
+  // cells cross the threshold, so no cell gets a verdict: those that would are "noise".
+  double scatter_pct = 0;
+  bool noisy = false;
+  size_t withheld = 0;  // cells with q < alpha and the effect, but within the runs' scatter
   bool failed = false;  // a regression beyond --fail-on-regression
 };
 

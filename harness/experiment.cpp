@@ -43,6 +43,10 @@ const std::vector<Hit>& Bench::reference_hits(const WorkloadSpec& spec, int thre
 }
 
 Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt) {
+  if (opt.cells) {  // a table's cells: `table --resume` takes those its CSV kept (harness/sweep.h)
+    opt.cells->check_scene(bench.scene());
+    if (const Record* kept = opt.cells->replay(bench.scene().name, spec.name(), std::string(scheme.name()))) return *kept;
+  }
   std::vector<Hit> hits;
   Record r = measure_rays(bench, spec.name(), bench.rays(spec), bench.reference_hits(spec, std::max(2, opt.threads)),
                           scheme, opt, hits);

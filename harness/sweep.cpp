@@ -66,11 +66,20 @@ CellStream::CellStream(std::string path, nlohmann::json meta, bool resume, const
         throw InputError("--resume: " + sidecar_path(path_) + " is not valid JSON");
       }
     }
+    if (old.contains("scene_hashes") && old["scene_hashes"].is_object()) old_hashes_ = old["scene_hashes"];
     for (const auto& k : must_match) {
       const nlohmann::json a = old.contains(k) ? old[k] : nlohmann::json(), b = meta_.contains(k) ? meta_[k] : nlohmann::json();
-      if (a != b)
-        throw InputError("--resume: " + path_ + " was written with " + k + " " + shown(a) + ", this sweep has " +
-                         shown(b) + "; its cells would not be comparable (remove the CSV or drop --resume)");
+      if (a == b) continue;
+      std::string what = k;
+      nlohmann::json was = a, is = b;
+      if (a.is_object() && b.is_object())  // name the setting inside (a table's "sweep")
+        for (const auto& [sub, v] : b.items())
+          if (!a.contains(sub) || a[sub] != v) {
+            what = k + "." + sub, was = a.contains(sub) ? a[sub] : nlohmann::json(), is = v;
+            break;
+          }
+      throw InputError("--resume: " + path_ + " was written with " + what + " " + shown(was) + ", this sweep has " +
+                       shown(is) + "; its cells would not be comparable (remove the CSV or drop --resume)");
     }
     cut_torn_line(path_);
     if (std::filesystem::file_size(path_) > 0) {
@@ -133,6 +142,56 @@ void CellStream::finish(const nlohmann::json& extra) {
   meta_["rows"] = records_.size();
   meta_["resumed_rows"] = resumed_;
   write_sidecar(path_, meta_);
+}
+
+const Record* CellStream::replay(const std::string& scene, const std::string& workload, const std::string& scheme) {
+  if (replayed_ >= resumed_) return nullptr;
+  const Record& r = records_[replayed_];
+  auto f = [&](const char* k) { const std::string* v = r.get(k); return v ? *v : std::string(); };
+  if (f("scene") != scene || f("workload") != workload || f("scheme") != scheme)
+    throw InputError("--resume: row " + std::to_string(replayed_ + 2) + " of " + path_ + " is " + f("scene") + " / " +
+                     f("workload") + " / " + f("scheme") + ", this table's cell there is " + scene + " / " + workload +
+                     " / " + scheme + "; the table's cells changed (remove the CSV or drop --resume)");
+  return &records_[replayed_++];
+}
+
+void CellStream::check_scene(const Scene& scene) {
+  const std::string& name = scene.name;
+  nlohmann::json& hashes = meta_["scene_hashes"];
+  if (hashes.contains(name)) return;
+  const std::string h = std::to_string(scene.content_hash());
+  if (old_hashes_.contains(name) && old_hashes_[name] != h)
+    throw InputError("--resume: " + path_ + " was measured on another scene '" + name + "' (content hash " +
+                     old_hashes_[name].dump() + ", now " + h + "); its cells would not be comparable (remove the CSV "
+                     "or drop --resume)");
+  hashes[name] = h;
+  if (fd_ >= 0) write_sidecar(path_, meta_);  // a later scene of a table: the sidecar knows it now
+}
+
+void CellStream::finish_table() {
+  nlohmann::json done;
+  std::ifstream js(sidecar_path(path_));
+  try {
+    js >> done;
+  } catch (const std::exception&) {
+    return;  // the table wrote no sidecar (no --csv): nothing to add to
+  }
+  for (const auto& [k, v] : meta_.items())
+    if (!done.contains(k) && k != "status") done[k] = v;
+  write_sidecar(path_, done);
+}
+
+bool CellStream::complete(const std::string& csv) {
+  std::error_code ec;
+  if (!std::filesystem::exists(csv, ec)) return false;
+  std::ifstream js(sidecar_path(csv));
+  nlohmann::json meta;
+  try {
+    js >> meta;
+  } catch (const std::exception&) {
+    return false;
+  }
+  return meta.value("status", "") == "complete";
 }
 
 std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& scene_arg, const std::string& csv,

@@ -7,6 +7,11 @@
 // (status "complete"). Each
 // row is one write(2) of the whole line followed by fsync(2): after a kill the file ends at a row
 // boundary, or (a kill inside the write) with one torn line, which a resume cuts off.
+//
+// `table --resume` (tables have no cell key: their rows get their identifying columns after
+// measure_cell) replays the kept rows in the order the table measures its cells, checking each
+// against the cell's scene, workload and scheme, and checks each scene's content hash as the
+// table loads it.
 #pragma once
 #include <set>
 #include <string>
@@ -17,6 +22,8 @@
 #include "harness/records.h"
 
 namespace tb {
+
+struct Scene;  // structures/scene.h
 
 // Identity of a cell within one sweep: what differs between the cells of a `run` (the sweep-wide
 // settings are in the sidecar and checked as a whole on resume).
@@ -46,6 +53,19 @@ class CellStream {
   // Rewrites the sidecar with status "complete" and `extra` merged in.
   void finish(const nlohmann::json& extra = nlohmann::json::object());
 
+  // For tables. The kept row that is the table's next cell, or nullptr once the kept rows are
+  // used up (then the cell is measured); throws InputError when the kept row is another cell
+  // (the table's cells changed).
+  const Record* replay(const std::string& scene, const std::string& workload, const std::string& scheme);
+  // Records a scene's content hash in the sidecar (scene_hashes; hashed once per name); throws
+  // InputError on resume when the interrupted sweep loaded another scene of that name.
+  void check_scene(const Scene& scene);
+  // After the table's own write_csv replaced the files: adds this sweep's identity (meta keys
+  // its sidecar lacks) so that a --resume of the finished table can be checked.
+  void finish_table();
+  // Whether `csv`'s sidecar says its sweep finished (status "complete").
+  static bool complete(const std::string& csv);
+
  private:
   void open();
   void rewrite();
@@ -56,6 +76,8 @@ class CellStream {
   std::vector<Record> records_;
   std::set<std::string> keys_;
   size_t resumed_ = 0;
+  size_t replayed_ = 0;
+  nlohmann::json old_hashes_ = nlohmann::json::object();  // scene_hashes of the resumed sweep
   bool empty_file_ = true;  // nothing (not even a header) on disk yet
 };
 

@@ -156,12 +156,43 @@ int run_table(const std::string& name, const TableOptions& opt) {
     throw InputError("unknown table '" + name + "' (available:" + known + ")");
   }
   if (opt.csv.empty()) return it->second(opt);
+  // Tables whose rows are not measure_cell's cells: build times structure builds, simt runs the
+  // warp model; nothing of theirs reaches the CSV before the end, so there is nothing to resume.
+  if (opt.resume && (name == "build" || name == "simt"))
+    throw InputError("table " + name + ": --resume is not available: this table writes its CSV only when it "
+                     "finishes (it does not measure ray cells one by one); run it again without --resume");
+  // The sweep's identity: a resume must have the same settings (and, per scene, the same content
+  // hash: CellStream::check_scene; and the same git revision, from the provenance).
+  const RunOptions& r = opt.run;
+  const nlohmann::json sweep = {{"scene", table_scene(opt)},
+                                {"schemes", r.schemes},
+                                {"seed", r.seed},
+                                {"width", opt.width_given ? int(r.width) : -1},
+                                {"height", opt.height_given ? int(r.height) : -1},
+                                {"view", r.view + 1},
+                                {"reps", r.reps},
+                                {"threads", r.threads},
+                                {"kernel", std::string(kernel_name(r.scheme_config.kernel))},
+                                {"params", r.scheme_config.params}};
+  const std::string command = "table " + name;
   // Each measured cell goes to the CSV as it finishes, so a killed table keeps them; the table's
-  // own write_csv at the end replaces the file (atomically) with its finished rows.
-  CellStream cells(opt.csv, {{"command", "table " + name}, {"scene", table_scene(opt)}}, false, {});
+  // own write_csv at the end replaces the file (atomically) with its finished rows. On resume the
+  // constructor refuses another sweep's CSV, naming what differs.
+  CellStream cells(opt.csv, {{"command", command}, {"scene", table_scene(opt)}, {"sweep", sweep}}, opt.resume,
+                   {"command", "git_revision", "sweep"});
+  if (opt.resume && CellStream::complete(opt.csv)) {
+    // Its rows are the table's finished ones, not cells to replay: nothing is left to measure.
+    std::fprintf(stderr, "%s: the table finished already (sidecar status complete); nothing to resume\n",
+                 opt.csv.c_str());
+    return 0;
+  }
+  if (cells.resumed())
+    std::fprintf(stderr, "%s: resuming, %zu cells there already\n", opt.csv.c_str(), cells.resumed());
   TableOptions streamed = opt;
   streamed.run.cells = &cells;
-  return it->second(streamed);
+  const int rc = it->second(streamed);
+  cells.finish_table();
+  return rc;
 }
 
 }  // namespace tb

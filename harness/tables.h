@@ -15,6 +15,9 @@ struct TableOptions {
   // Whether --width / --height were given; when not, a table measured at a stated resolution
   // runs at the thesis' (divergence: 1280x800, §3.4).
   bool width_given = false, height_given = false;
+  // Keep the cells an interrupted table of the same settings streamed into `csv` and measure only
+  // the rest (harness/sweep.h); refused for the tables that do not stream cells (build, simt).
+  bool resume = false;
 };
 
 std::vector<std::string> table_names();

@@ -297,9 +297,16 @@ class Builder {
  private:
   void add_primitive(const tinygltf::Primitive& prim, const Mat4& world, const std::string& where) {
     const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+    // Points and lines have no surface a ray can hit. Skipping them would trace a scene other than
+    // the one a viewer shows (points and lines are drawn there), as skipping a Draco primitive would
+    // drop geometry, so they are refused the same way, naming the primitive (issue 20).
     if (mode == TINYGLTF_MODE_POINTS || mode == TINYGLTF_MODE_LINE || mode == TINYGLTF_MODE_LINE_LOOP ||
-        mode == TINYGLTF_MODE_LINE_STRIP)
-      return;  // points and lines have no surface to hit
+        mode == TINYGLTF_MODE_LINE_STRIP) {
+      static const char* const kNames[] = {"POINTS", "LINES", "LINE_LOOP", "LINE_STRIP"};
+      throw InputError(error_line(path_, where + "is mode " + std::to_string(mode) + " (" + kNames[mode] +
+                                             "), which has no surface to trace; this loader reads triangle "
+                                             "primitives only (modes 4-6: remove the point/line primitives)"));
+    }
     if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN)
       throw InputError(error_line(path_, where + "unknown primitive mode " + std::to_string(mode)));
     auto pos_it = prim.attributes.find("POSITION");

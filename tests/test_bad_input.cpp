@@ -288,7 +288,7 @@ TEST_F(BadInput, SceneFilesAreRejectedWithFileAndReason) {
   }
   expect_scene("zero.gltf", R"({"asset": {"version": "2.0"}})", {"has no triangles"});
   expect_scene("lines.gltf", gltf_triangle().replace(gltf_triangle().find("}]}]"), 1, ", \"mode\": 1}"),
-               {"has no triangles"});
+               {"lines.gltf", "mesh 0 primitive 0: is mode 1 (LINES)"});  // refused by name (issue 20)
   // Missing buffers in glTF.
   expect_scene("missingbuf.gltf", gltf_triangle("", R"({"byteLength": 36, "uri": "missing.bin"})"), {"missing.bin"});
   expect_scene("nobuffer.gltf", gltf_triangle("", R"({"byteLength": 36})"), {"invalid glTF file"});

@@ -13,6 +13,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "harness/sweep.h"
 #include "test_util.h"
 
 namespace tb {
@@ -251,14 +252,21 @@ TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
   std::filesystem::remove_all(dir);
 }
 
+// The command exited with `code` and its output says `needle`.
+void expect_says(const Result& r, int code, const std::string& needle) {
+  EXPECT_EQ(r.code, code) << r.out;
+  EXPECT_NE(r.out.find(needle), std::string::npos) << r.out;
+}
+
 // A table streams its measured cells too: killed after the first, its CSV holds whole rows under
-// one header and the sidecar says the table did not finish.
-TEST(CLI, KilledTableKeepsItsCells) {
+// one header and the sidecar says the table did not finish; `table --resume` completes it with
+// the rows (and no duplicate) of an uninterrupted table, refuses other settings naming the one
+// that differs, and has nothing to do for a finished table. Tables that do not stream refuse it.
+TEST(CLI, KilledTableKeepsItsCellsAndResumeCompletesIt) {
   const auto dir = test::temp_dir("cli_table_kill");
-  const std::string csv = (dir / "b.csv").string();
-  ASSERT_TRUE(killed_after_first_row("table bounce --scene sphere --schemes bvh_single,mbvh8_single --width 64 "
-                                     "--height 64 --reps 20 --csv " + csv, csv))
-      << "the table ended before the kill";
+  const std::string csv = (dir / "b.csv").string(), full = (dir / "full.csv").string();
+  const std::string table = "table bounce --scene sphere --schemes bvh_single,mbvh8_single --width 64 --height 64 --csv ";
+  ASSERT_TRUE(killed_after_first_row(table + csv + " --reps 20", csv)) << "the table ended before the kill";
   const std::vector<std::string> lines = lines_of(csv);
   ASSERT_GE(lines.size(), 2u);
   EXPECT_LT(lines.size(), 9u);
@@ -271,6 +279,66 @@ TEST(CLI, KilledTableKeepsItsCells) {
   const Result bad = travbench("table bounce --scene sphere --param bogus=1 --csv " + csv);
   EXPECT_EQ(bad.code, 2) << bad.out;
   EXPECT_EQ(lines_of(csv), lines);
+  const std::set<std::string> kept = cells_of(csv);
+
+  expect_says(travbench(table + csv + " --reps 2 --resume"), 2, "sweep.reps 20, this sweep has 2");
+  EXPECT_EQ(lines_of(csv), lines);
+  const Result resumed = travbench(table + csv + " --reps 20 --resume");
+  ASSERT_EQ(resumed.code, 0) << resumed.out;
+  EXPECT_NE(resumed.out.find("resuming, " + std::to_string(kept.size()) + " cells there already"), std::string::npos)
+      << resumed.out;
+  ASSERT_EQ(travbench(table + full + " --reps 1").code, 0);
+  const std::set<std::string> done = cells_of(csv);
+  EXPECT_EQ(done, cells_of(full));
+  EXPECT_EQ(lines_of(csv).size(), lines_of(full).size());
+  EXPECT_EQ(lines_of(csv)[0], lines_of(full)[0]) << "the finished table's columns";
+  for (const auto& c : kept) EXPECT_TRUE(done.count(c)) << c;
+  // Finished: nothing to resume, the files stay as they are.
+  const std::vector<std::string> finished = lines_of(csv);
+  expect_says(travbench(table + csv + " --reps 20 --resume"), 0, "nothing to resume");
+  EXPECT_EQ(lines_of(csv), finished);
+  expect_says(travbench(table + csv + " --reps 3 --resume"), 2, "sweep.reps");
+  expect_says(travbench("table build --scene sphere --reps 1 --resume --csv " + (dir / "build.csv").string()), 2,
+              "--resume is not available");
+  std::filesystem::remove_all(dir);
+}
+
+// The pieces of `table --resume` below the CLI: kept rows are replayed in order and each must be
+// the table's cell at its place; a scene of the same name but other content is refused.
+TEST(CellStream, TableReplayChecksCellOrderAndSceneContent) {
+  const auto dir = test::temp_dir("cellstream_replay");
+  const std::string csv = (dir / "t.csv").string();
+  const nlohmann::json meta = {{"command", "table test"}};
+  const Scene scene = load_scene("sphere");
+  auto cell = [&](const char* workload) {
+    Record r;
+    r.set("scene", scene.name).set("workload", workload).set("scheme", "bvh_single").set("mrays_median", 1.5);
+    return r;
+  };
+  {
+    CellStream s(csv, meta, false, {"command"});
+    s.check_scene(scene);
+    s.append(cell("primary"));
+    s.append(cell("shadow"));
+  }  // "killed": never finished
+  {
+    CellStream s(csv, meta, true, {"command"});
+    EXPECT_EQ(s.resumed(), 2u);
+    s.check_scene(scene);
+    const Record* first = s.replay(scene.name, "primary", "bvh_single");
+    ASSERT_NE(first, nullptr);
+    EXPECT_EQ(*first->get("mrays_median"), "1.5");
+    EXPECT_NE(s.replay(scene.name, "shadow", "bvh_single"), nullptr);
+    EXPECT_EQ(s.replay(scene.name, "rnd", "bvh_single"), nullptr);  // used up: measure it
+  }
+  {
+    CellStream s(csv, meta, true, {"command"});
+    EXPECT_THROW(s.replay(scene.name, "shadow", "bvh_single"), InputError);  // the table's cells changed
+    Scene moved = scene;
+    moved.positions[0].x += 1;
+    EXPECT_THROW(s.check_scene(moved), InputError);
+  }
+  EXPECT_THROW(CellStream(csv, {{"command", "table other"}}, true, {"command"}), InputError);
   std::filesystem::remove_all(dir);
 }
 

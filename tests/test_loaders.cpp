@@ -580,7 +580,7 @@ TEST_F(LoaderTest, GlbMatchesGltf) {
   EXPECT_EQ(upper.triangles, s.triangles);
 }
 
-TEST_F(LoaderTest, GltfIndexTypesStrideStripsFansAndSkippedModes) {
+TEST_F(LoaderTest, GltfIndexTypesStrideStripsAndFans) {
   Gltf g;
   const int p4 = g.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}});
   const int i8 = g.indices<uint8_t>({0, 1, 2});
@@ -596,9 +596,7 @@ TEST_F(LoaderTest, GltfIndexTypesStrideStripsFansAndSkippedModes) {
   interleaved["attributes"]["NORMAL"] = nint;
   const int mesh = g.mesh({Gltf::prim(p4, i8), Gltf::prim(p4, i32), interleaved,
                            Gltf::prim(p4, -1, 5),   // strip 0 1 2 3 -> (0,1,2) (1,3,2)
-                           Gltf::prim(p4, -1, 6),   // fan 0 1 2 3 -> (1,2,0) (2,3,0)
-                           Gltf::prim(p4, -1, 0),   // points: skipped
-                           Gltf::prim(p4, -1, 1)});  // lines: skipped
+                           Gltf::prim(p4, -1, 6)});  // fan 0 1 2 3 -> (1,2,0) (2,3,0)
   g.node({{"mesh", mesh}});
   // No "scenes": the root nodes are drawn.
   Scene s = tb::load_scene_file(write("modes.gltf", g.gltf_text()));
@@ -826,11 +824,20 @@ TEST_F(LoaderTest, GltfBadInput) {
     e["meshes"][0]["primitives"][0] = prim;
     expect_input_error(write("draco_prim.gltf", e.dump()), "Draco-compressed");
   }
-  {  // only points: nothing to trace
-    Gltf g;
-    const int p = g.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
-    g.node({{"mesh", g.mesh({Gltf::prim(p, -1, 0)})}});
-    expect_input_error(write("points.gltf", g.gltf_text()), "has no triangles");
+  // Points and lines (modes 0-3) have no surface: refused, naming the mesh, the primitive and the
+  // mode, whether the file has nothing else or mixes them with triangles (issue 20).
+  for (int mode : {0, 1, 2, 3}) {
+    static const char* const names[] = {"POINTS", "LINES", "LINE_LOOP", "LINE_STRIP"};
+    const std::string why = std::string("is mode ") + std::to_string(mode) + " (" + names[mode] + ")";
+    Gltf only;
+    const int p = only.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
+    only.node({{"mesh", only.mesh({Gltf::prim(p, -1, mode)})}});
+    expect_input_error(write("only_" + std::to_string(mode) + ".gltf", only.gltf_text()), "mesh 0 primitive 0: " + why);
+    Gltf mixed;
+    const int q = mixed.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
+    mixed.node({{"mesh", mixed.mesh({Gltf::prim(q)})}});
+    mixed.node({{"mesh", mixed.mesh({Gltf::prim(q), Gltf::prim(q, -1, 4), Gltf::prim(q, -1, mode)})}});
+    expect_input_error(write("mixed_" + std::to_string(mode) + ".gltf", mixed.gltf_text()), "mesh 1 primitive 2: " + why);
   }
 }
 
