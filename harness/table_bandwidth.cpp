@@ -25,6 +25,10 @@ int bandwidth_table(const TableOptions& opt) {
     t->prepare(bench.scene(), bench.cache());
     for (const std::string w : {"primary", "bounce:2"}) {
       Record r = measure_cell(bench, table_spec(opt, w, run.view), *t, run);
+      // Columns a scheme gathers only under the cache (treelet_queue's memory-read split): the
+      // --stats columns were taken before measure_cell's --cache trace.
+      for (const StatColumn& s : t->take_stat_columns())
+        if (s.name.find("_mem_") != std::string::npos) r.set(s.name, s.value);
       // Memory reads are whole lines of the simulated hierarchy (64 bytes).
       const double rays = std::max(1.0, std::stod(*r.get("rays")));
       r.set("mem_reads_per_ray", std::stod(*r.get("mem_read_m")) * 1e6 / rays);

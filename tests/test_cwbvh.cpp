@@ -2,6 +2,10 @@
 // contain the true boxes (offsets up to 1e6, flat and near-zero children, flush-to-zero mode as
 // in the traversal), unused slots can never be entered, the compressed tree has the MBVH8's
 // topology and leaves, and its nodes take at most 0.35x the MBVH8's bytes.
+#include <immintrin.h>
+
+#include <bit>
+#include <cmath>
 #include <random>
 
 #include "structures/builtin_scenes.h"
@@ -36,6 +40,39 @@ TEST(CWBVH, QuantizationIsConservative) {
         // Tight: one cell less would not contain the box.
         if (ql < 255) { ASSERT_GT(cw_decode(p, s, uint8_t(ql + 1)), lo); }
         if (qh > 0) { ASSERT_LT(cw_decode(p, s, uint8_t(qh - 1)), hi); }
+      }
+    }
+  }
+}
+
+// cwbvh_single decodes with a packed fused multiply-add; the builder checks its quantization with
+// cw_decode. They must agree bit for bit (the conservativeness proof is about the decoded floats):
+// every q, every exponent, origins at zero, tiny, negative, at 1e5-1e7 offsets and near the float
+// range's end (where q * 2^e overflows), in flush-to-zero mode. Where q * 2^e is finite the fused
+// decode also equals the multiply then add it replaced (so every compressed tree is unchanged).
+TEST(CWBVH, FusedDecodeEqualsTheBuilderDecode) {
+  const FlushDenormals ftz;
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> U(-1.f, 1.f);
+  for (int e = -126; e <= 127; ++e) {
+    const float s = cw_scale(int8_t(e));
+    for (float base : {0.f, 1e-38f, -1e-38f, 1.f, 1e5f, -1e6f, 1e7f, 3e38f, -3e38f}) {
+      const float p = base * (1.f + 0.25f * U(rng)) + (base == 0.f ? U(rng) * std::ldexp(1.f, e) : 0.f);
+      for (int q0 = 0; q0 < 256; q0 += 8) {
+        alignas(32) float got[8];
+        const __m256 q = _mm256_setr_ps(float(q0), float(q0 + 1), float(q0 + 2), float(q0 + 3), float(q0 + 4),
+                                        float(q0 + 5), float(q0 + 6), float(q0 + 7));
+        _mm256_store_ps(got, _mm256_fmadd_ps(q, _mm256_set1_ps(s), _mm256_set1_ps(p)));
+        for (int i = 0; i < 8; ++i) {
+          const float want = cw_decode(p, s, uint8_t(q0 + i));
+          ASSERT_EQ(std::bit_cast<uint32_t>(got[i]), std::bit_cast<uint32_t>(want))
+              << "e " << e << " p " << p << " q " << q0 + i;
+          volatile float qs = float(q0 + i) * s;  // the multiply then add, rounded separately
+          if (std::isfinite(qs)) {
+            volatile float sum = p + qs;
+            ASSERT_EQ(std::bit_cast<uint32_t>(float(sum)), std::bit_cast<uint32_t>(want)) << "e " << e << " q " << q0 + i;
+          }
+        }
       }
     }
   }

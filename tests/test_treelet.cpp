@@ -3,6 +3,7 @@
 // kernels on the same tree and only suspends a ray between two visits.
 #include <cstring>
 
+#include "cachesim/hierarchy.h"
 #include "structures/treelet.h"
 #include "test_util.h"
 #include "traversal/mbvh_fetch.h"
@@ -92,6 +93,45 @@ TEST(TreeletQueue, StatsShowQueuedRaysAndSwitches) {
   EXPECT_GT(std::stod(*rows[0].get("treelet_rays_per_visit")), 1.0);
   EXPECT_GT(std::stod(*rows[0].get("treelets")), 10.0);
   EXPECT_EQ(*rows[0].get("false_miss"), "0");
+}
+
+// --cache: the memory-read split (slots, stacks, nodes, triangle blocks, other) adds up to the
+// simulated memory reads, each part the scheme reads is seen, and the cache-probed path (with the
+// split probe) returns mbvh8_single's hits. A pool smaller than the batch makes the root's treelet
+// start rays into freed slots.
+TEST(TreeletQueue, MemoryReadSplitAddsUpToSimulatedReads) {
+  Bench& bench = test::bench_for("stadium");
+  const RayBatch& b = bench.rays(test::small_spec("bounce:2", 64));
+  auto ref = make_scheme("mbvh8_single");
+  ref->prepare(bench.scene(), bench.cache());
+  std::vector<Hit> a(b.size()), q(b.size());
+  trace_batch(*ref, b, a, 1);
+  SchemeConfig cfg;
+  cfg.params = {{"treelet_bytes", "4096"}, {"rays_in_flight", "300"}};
+  auto t = make_scheme("treelet_queue", cfg);
+  t->prepare(bench.scene(), bench.cache());
+  t->take_stat_columns();
+  // A small hierarchy, so the stadium's tree does not fit and every part misses somewhere.
+  cachesim::Hierarchy h(cachesim::parse_config("l1=1K:2,l2=4K:4"));
+  Probe probe;
+  probe.cache = &h;
+  t->trace(b, PacketRange::all(b), q, probe);
+  size_t differ = 0;
+  for (size_t i = 0; i < b.size(); ++i) differ += std::memcmp(&a[i], &q[i], sizeof(Hit)) != 0;
+  EXPECT_EQ(differ, 0u);
+  double sum = 0;
+  int parts = 0;
+  for (const StatColumn& c : t->take_stat_columns()) {
+    if (c.name.rfind("treelet_mem_", 0) != 0) continue;
+    ++parts;
+    EXPECT_GT(c.value, 0.0) << c.name;
+    sum += c.value;
+  }
+  EXPECT_EQ(parts, 5);
+  EXPECT_NEAR(sum * double(b.size()), double(h.memory_reads()), 0.5);
+  // Without a cache the split is not reported (no zeros posing as measurements).
+  t->trace(b, PacketRange::all(b), q, probe = Probe{});
+  for (const StatColumn& c : t->take_stat_columns()) EXPECT_NE(c.name.rfind("treelet_mem_", 0), 0u) << c.name;
 }
 
 }  // namespace

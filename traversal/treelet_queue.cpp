@@ -6,18 +6,25 @@
 // The structure is mbvh8_single's cached MBVH8 (same build parameters and defaults), cut into
 // treelets of at most `treelet_bytes` (structures/treelet.h). A pool of `rays_in_flight` rays
 // each keeps its whole traversal state — the pending stack of (reference, entry distance), the
-// reference it visits next, its closest hit so far — in memory while it waits. Every ray starts
-// in the root's queue; the scheduler repeatedly takes the fullest queue and runs each of its rays
-// with mbvh8_single's loop (mbvh_traverse_from: box_test, the bitonic child order, block_intersect)
-// until the next reference it would visit lies in another treelet; the ray then goes to that
-// treelet's queue. A finished ray frees its slot for the next ray of the call. Because a ray is
-// only suspended between two visits and resumes with the same stack, it visits exactly the nodes
-// and leaves mbvh8_single visits, in the same order: its hits are bit-identical (tested).
+// reference it visits next, its closest hit so far — in memory while it waits. The scheduler
+// repeatedly takes the fullest queue and runs each of its rays with mbvh8_single's loop
+// (mbvh_traverse_from: box_test, the bitonic child order, block_intersect) until the next
+// reference it would visit lies in another treelet; the ray then goes to that treelet's queue.
+// Rays not yet started count towards the root treelet's queue (up to the free slots) and start
+// there, from the batch, when it is visited; a finished ray frees its slot for the next one. The
+// default pool holds a whole 65536-ray chunk: on crytek_sponza_partial 512x512 bounce:2 8192 rays
+// gave 8.4 simulated memory reads per ray, 65536 6.5 (docs/PERFORMANCE.md, Bandwidth).
+// Because a ray is only suspended between two visits and resumes with the same stack, it visits
+// exactly the nodes and leaves mbvh8_single visits, in the same order: its hits are
+// bit-identical (tested).
 //
 // Statistics (`run --stats`, from the instrumented traces): treelet_rays_per_visit (rays run per
 // queue taken), treelet_queues_nonempty (non-empty queues when the scheduler takes one),
 // treelet_queue_rays (rays waiting per non-empty queue then), treelet_switches_per_ray (times a
-// ray moved to another treelet's queue), treelets (how many the tree was cut into).
+// ray moved to another treelet's queue), treelets (how many the tree was cut into); with --cache
+// also where the simulated memory reads go, per ray: treelet_mem_slots and treelet_mem_stacks (the
+// suspended rays' state), treelet_mem_nodes, treelet_mem_tris (the MBVH's node and triangle-block arrays) and
+// treelet_mem_other (the ray batch, the queues, the treelet map), summing to mem_read_m.
 #include <atomic>
 #include <memory>
 #include <queue>
@@ -26,8 +33,40 @@
 #include "traversal/mbvh_fetch.h"
 #include "traversal/mbvh_traverse.h"
 
+#include "cachesim/hierarchy.h"
+
 namespace tb {
 namespace {
+
+// The cache probe of one traced call with its simulated memory reads split by the array an access
+// falls in (the SplitProbe::Part ranges); forwards everything to the harness' Probe.
+struct SplitProbe {
+  static constexpr bool enabled = true;
+  enum Part { state_slots, state_stacks, node_array, block_array, small_array, parts };
+  Probe& p;
+  TraversalCounts* counts = p.counts;
+  const char* lo[parts] = {};
+  const char* hi[parts] = {};
+  uint64_t reads[parts + 1] = {};  // the last: anything else
+  template <class T>
+  void range(Part k, const T* first, size_t n) {
+    lo[k] = reinterpret_cast<const char*>(first), hi[k] = reinterpret_cast<const char*>(first + n);
+  }
+  template <class F>
+  void split(const void* a, F&& f) {
+    const uint64_t before = p.cache->memory_reads();
+    f();
+    const char* c = static_cast<const char*>(a);
+    int k = 0;
+    while (k < parts && !(c >= lo[k] && c < hi[k])) ++k;
+    reads[k] += p.cache->memory_reads() - before;
+  }
+  void node(const void* a, uint32_t b, uint32_t n = 1) { split(a, [&] { p.node(a, b, n); }); }
+  void leaf(const void* a, uint32_t b, uint32_t n = 1) { split(a, [&] { p.leaf(a, b, n); }); }
+  void tris(const void* a, uint32_t b, uint32_t n = 1) { split(a, [&] { p.tris(a, b, n); }); }
+  void read(const void* a, uint32_t b) { split(a, [&] { p.read(a, b); }); }
+  void write(const void* a, uint32_t b) { split(a, [&] { p.write(a, b); }); }
+};
 
 class TreeletQueue final : public TraverserBase<TreeletQueue> {
  public:
@@ -49,20 +88,48 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
     return {data_.mbvh->stats.node_bytes + tl_->map_bytes(), mbvh_prim_bytes(data_, TriKernel::watertight)};
   }
   // Queues fill from the rays of one call (as RayGrid's).
-  uint32_t preferred_chunk_rays() const override { return 65536; }
+  uint32_t preferred_chunk_rays() const override { return std::max<uint32_t>(65536, flight_); }
   std::vector<StatColumn> take_stat_columns() const override {
     const double visits = double(std::max<uint64_t>(1, visits_.exchange(0)));
     const double nonempty = double(nonempty_.exchange(0)), waiting = double(waiting_.exchange(0));
     const double rays = double(std::max<uint64_t>(1, rays_.exchange(0)));
-    return {{"treelet_rays_per_visit", double(run_rays_.exchange(0)) / visits},
+    std::vector<StatColumn> cols = {{"treelet_rays_per_visit", double(run_rays_.exchange(0)) / visits},
             {"treelet_queues_nonempty", nonempty / visits},
             {"treelet_queue_rays", nonempty > 0 ? waiting / nonempty : 0.0},
             {"treelet_switches_per_ray", double(switches_.exchange(0)) / rays},
             {"treelets", double(tl_->count())}};
+    // Only after a traced call with a cache (the harness takes --stats columns before its --cache
+    // trace: `table bandwidth` takes them again after it).
+    if (mem_split_.exchange(false))
+      cols.insert(cols.end(), {{"treelet_mem_slots", double(mem_slots_.exchange(0)) / rays},
+                               {"treelet_mem_stacks", double(mem_stacks_.exchange(0)) / rays},
+                               {"treelet_mem_nodes", double(mem_nodes_.exchange(0)) / rays},
+                               {"treelet_mem_tris", double(mem_tris_.exchange(0)) / rays},
+                               {"treelet_mem_other", double(mem_other_.exchange(0)) / rays}});
+    return cols;
   }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    if constexpr (std::is_same_v<P, Probe>) {
+      if (probe.cache) {
+        SplitProbe split{probe};
+        schedule(batch, range, hits, split);
+        mem_slots_ += split.reads[SplitProbe::state_slots];
+        mem_stacks_ += split.reads[SplitProbe::state_stacks];
+        mem_nodes_ += split.reads[SplitProbe::node_array];
+        mem_tris_ += split.reads[SplitProbe::block_array] + split.reads[SplitProbe::small_array];
+        mem_other_ += split.reads[SplitProbe::parts];
+        mem_split_ = true;
+        return;
+      }
+    }
+    schedule(batch, range, hits, probe);
+  }
+
+ private:
+  template <class P>
+  void schedule(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const MBVH<8, 8>& m = *data_.mbvh;
     const Treelets& tl = *tl_;
     const uint32_t end = batch.packet_begin[range.last];
@@ -83,9 +150,29 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
     std::vector<Slot> slots(flight);
     std::unique_ptr<MBVHStackEntry[]> stacks(new MBVHStackEntry[flight * cap]);
     std::vector<std::vector<uint32_t>> queues(tl.count());
-    // The scheduler's max-heap of (queue size, treelet), one entry per enqueue: an entry is current
-    // when the queue still has that size, and every queue has a current entry, so the first current
-    // entry on top is a fullest queue; stale ones are skipped.
+    if constexpr (std::is_same_v<P, SplitProbe>) {
+      probe.range(SplitProbe::state_slots, slots.data(), slots.size());
+      probe.range(SplitProbe::state_stacks, stacks.get(), flight * cap);
+      probe.range(SplitProbe::node_array, m.nodes.data(), m.nodes.size());
+      probe.range(SplitProbe::block_array, m.blocks.data(), m.blocks.size());
+      probe.range(SplitProbe::small_array, m.small.data(), m.small.size());
+    }
+    // Rays not yet started wait in no queue: the root's treelet counts them (as many as there are
+    // free slots) and starts them from the batch when it is visited, so a new ray's first visit
+    // reads the batch and a slot line it has just written, not a slot written a whole round before
+    // (at 262144 rays in flight on crytek_sponza_partial 512x512 bounce:2 that slot read was
+    // about one memory read per ray).
+    const uint32_t root_t = tl.of(0);
+    std::vector<uint32_t> free_slots(flight);
+    for (uint32_t k = 0; k < flight; ++k) free_slots[k] = flight - 1 - k;  // slot 0 first
+    auto size_of = [&](uint32_t t) {
+      size_t n = queues[t].size();
+      if (t == root_t) n += std::min<size_t>(free_slots.size(), end - next);
+      return uint32_t(n);
+    };
+    // The scheduler's max-heap of (queue size, treelet), one entry each time a size grows: an
+    // entry is current when the queue still has that size, and every non-empty queue has a current
+    // entry, so the first current entry on top is a fullest queue; stale ones are skipped.
     std::priority_queue<std::pair<uint32_t, uint32_t>> heap;
     uint64_t nonempty = 0, waiting = 0;  // live: non-empty queues, rays queued
     uint64_t st_visits = 0, st_run = 0, st_nonempty = 0, st_waiting = 0, st_switches = 0, st_rays = 0;
@@ -95,52 +182,61 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
       q.push_back(slot);
       probe.write(&q.back(), sizeof(uint32_t));
       ++waiting;
-      heap.push({uint32_t(q.size()), t});
+      heap.push({size_of(t), t});
     };
-    auto start = [&](uint32_t slot) {
-      const uint32_t i = next++;
-      const Ray& ray = batch.rays[i];
-      probe.read(&ray, sizeof(Ray));
-      if constexpr (P::enabled) {
-        if (probe.counts) probe.counts->rays++;
-        ++st_rays;
+    // Runs the ray of `slot` in treelet t until it finishes (its slot is freed) or leaves.
+    auto run_ray = [&](uint32_t slot, uint32_t t) {
+      Slot& s = slots[slot];
+      probe.read(&s, sizeof(Slot));
+      const Ray& ray = s.r;
+      const RayCtx rc(ray);
+      const bool done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
+          m, nullptr, NodeRay<8>(rc, ray.tmin), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
+          [&](uint32_t ref) {
+            const uint32_t& e = tl.entry(ref);
+            probe.read(&e, sizeof(uint32_t));
+            return e != t;
+          });
+      probe.write(&s, sizeof(Slot));
+      if (done) {
+        hits[s.ray] = finish_hit(s.hit);
+        probe.write(&hits[s.ray], sizeof(Hit));
+        free_slots.push_back(slot);
+        if (t != root_t && next < end) heap.push({size_of(root_t), root_t});
+      } else {
+        if constexpr (P::enabled) ++st_switches;
+        enqueue(slot, tl.of(s.at.cur));
       }
-      slots[slot] = {ray, {0, 0}, i, initial_hit(ray)};
-      probe.write(&slots[slot], sizeof(Slot));
-      enqueue(slot, tl.of(0));
     };
-    for (uint32_t s = 0; s < flight; ++s) start(s);
+    heap.push({size_of(root_t), root_t});
     std::vector<uint32_t> work;
     while (!heap.empty()) {
       const uint32_t size = heap.top().first, t = heap.top().second;
       heap.pop();
-      if (queues[t].size() != size) continue;
-      if constexpr (P::enabled) ++st_visits, st_run += size, st_nonempty += nonempty, st_waiting += waiting;
+      if (size == 0 || size_of(t) != size) continue;
+      if constexpr (P::enabled) ++st_visits, st_nonempty += nonempty, st_waiting += waiting;
       work.clear();
       work.swap(queues[t]);
-      --nonempty, waiting -= size;
+      if (!work.empty()) --nonempty, waiting -= work.size();
       for (const uint32_t& slot : work) {
         probe.read(&slot, sizeof(uint32_t));
-        Slot& s = slots[slot];
-        probe.read(&s, sizeof(Slot));
-        const Ray& ray = s.r;
-        const RayCtx rc(ray);
-        const bool done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
-            m, nullptr, NodeRay<8>(rc, ray.tmin), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
-            [&](uint32_t ref) {
-              const uint32_t& e = tl.entry(ref);
-              probe.read(&e, sizeof(uint32_t));
-              return e != t;
-            });
-        probe.write(&s, sizeof(Slot));
-        if (done) {
-          hits[s.ray] = finish_hit(s.hit);
-          probe.write(&hits[s.ray], sizeof(Hit));
-          if (next < end) start(slot);
-        } else {
-          if constexpr (P::enabled) ++st_switches;
-          enqueue(slot, tl.of(s.at.cur));
+        run_ray(slot, t);
+      }
+      if constexpr (P::enabled) st_run += work.size();
+      // The root's treelet starts new rays while slots are free (a ray that finishes here frees
+      // its slot for the next one at once).
+      while (t == root_t && next < end && !free_slots.empty()) {
+        const uint32_t slot = free_slots.back(), i = next++;
+        free_slots.pop_back();
+        const Ray& ray = batch.rays[i];
+        probe.read(&ray, sizeof(Ray));
+        if constexpr (P::enabled) {
+          if (probe.counts) probe.counts->rays++;
+          ++st_rays, ++st_run;
         }
+        slots[slot] = {ray, {0, 0}, i, initial_hit(ray)};
+        probe.write(&slots[slot], sizeof(Slot));
+        run_ray(slot, t);
       }
     }
     if constexpr (P::enabled) {
@@ -149,13 +245,14 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
     }
   }
 
- private:
   MBVHBuildParams params_;
   size_t budget_;
   uint32_t flight_;
   MBVHData<8, 8> data_;
   std::shared_ptr<const Treelets> tl_;
   mutable std::atomic<uint64_t> visits_{0}, run_rays_{0}, nonempty_{0}, waiting_{0}, switches_{0}, rays_{0};
+  mutable std::atomic<uint64_t> mem_slots_{0}, mem_stacks_{0}, mem_nodes_{0}, mem_tris_{0}, mem_other_{0};
+  mutable std::atomic<bool> mem_split_{false};
 };
 
 }  // namespace
@@ -165,7 +262,7 @@ ParamSpecs params_treelet_queue() {
   return mbvh_param_specs(kMBVH8Defaults) +
          ParamSpecs{int_param("treelet_bytes", 262144, 256, 1 << 30,
                               "treelet byte budget (nodes + their leaves' blocks): 262144 = a 256 KiB L2; 32768 for L1"),
-                    int_param("rays_in_flight", 8192, 1, 1 << 20,
+                    int_param("rays_in_flight", 65536, 1, 1 << 20,
                               "rays whose traversal state waits in the queues at once (the ray pool)")};
 }
 
