@@ -298,17 +298,15 @@ class SpatialBuilder {
           continue;
         }
         // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
-        // same way): the part left of plane b + 1 goes to bin b, the rest carries on.
+        // same way): one float sweep of the triangle's edges through the planes (clip.h,
+        // chop_triangle_bounds, padded outward so each part is conservative), each part cut to
+        // the reference's box.
         const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
-        AABB rest = r.box;
-        for (int b = b0; b < b1; ++b) {
-          AABB l, rr;
-          split_ref(v, rest, a, ab.pl[b + 1], l, rr);
-          if (!l.empty()) bins[b].box.grow(l);
-          rest = rr;
-          if (rr.empty()) break;
+        chop_triangle_bounds(v, a, ab.pl + b0, b1 - b0 + 1, parts_);
+        for (int b = b0; b <= b1; ++b) {
+          const AABB part = intersect(parts_[b - b0], r.box);
+          if (!part.empty()) bins[b].box.grow(part);
         }
-        if (!rest.empty()) bins[b1].box.grow(rest);
       }
       sweep(bins, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
     }
@@ -384,6 +382,7 @@ class SpatialBuilder {
   size_t used_ = 0;
   float root_area_ = 1.f;
   std::vector<Bin> bins_;
+  AABB parts_[257];  // spatial_split's chopped parts of one reference (sbins_ <= 256)
   std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;

@@ -4,6 +4,7 @@
 #include <bit>
 #include <limits>
 #include <cmath>
+#include <utility>
 #include <cstdint>
 
 namespace tb {
@@ -155,6 +156,66 @@ void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AAB
       }
       left.grow(x);
       right.grow(x);
+    }
+  }
+}
+
+// The float crossing of edge (p, q) with the plane x[axis] = w, p[axis] < w < q[axis]: t = (w -
+// p_a) * inv with inv = fl(1 / fl(q_a - p_a)), then c_k = fl(p_k + fl(t * fl(q_k - p_k))) on each
+// other axis k. Error bound (u = 2^-24, standard model |fl(x op y) - x op y| <= u |x op y|, no
+// underflow): t carries four roundings (the two differences, the reciprocal, the product), so
+// t' = t (1 + d), |d| <= 4u + O(u^2); with d_k = q_k - p_k, |d_k| <= 2M where M = max(|p_k|,
+// |q_k|), the product fl(t' fl(d_k)) is t d_k (1 + e), |e| <= 6u + O(u^2), and the final sum adds
+// u |c| <= u M (the exact crossing lies on the segment, |c| <= M): |c' - c| <= 12uM + uM + O(u^2)
+// = 13.001uM. Padding by 32uM = M * 2^-19 (exact: a power of two), the padded subtraction and
+// addition rounding by at most u (M + pad), gives fl(c' - pad) <= c - 17uM < c and
+// fl(c' + pad) > c. Underflow adds at most 2^-149 per operation (and |q_a - p_a| >= 2^-100 is
+// required, so 1 / (q_a - p_a) cannot overflow and an underflowed w - p_a moves t by at most
+// 2^-50, i.e. c by 2^-49 M): FLT_MIN more covers it. Below 2^-100 the crossing is bounded by the
+// edge's own box (it lies on the edge), which is also the clamp for every crossing.
+void chop_triangle_bounds(const Vec3 v[3], int axis, const float* pl, int n, AABB* out) {
+  for (int i = 0; i < n; ++i) out[i] = AABB{};
+  int slab[3];
+  for (int j = 0; j < 3; ++j) {
+    // Slab of the vertex: the last i with pl[i] <= x (i >= 1), else 0; on a plane it is in both.
+    const float x = v[j][axis];
+    const int i = int(std::upper_bound(pl + 1, pl + n, x) - pl) - 1;
+    slab[j] = i;
+    out[i].grow(v[j]);
+    if (i > 0 && pl[i] == x) out[i - 1].grow(v[j]);
+  }
+  constexpr float kTiny = 0x1p-100f, kPad = 0x1p-19f, kAbs = std::numeric_limits<float>::min();
+  for (int j = 0; j < 3; ++j) {
+    int i0 = j, i1 = (j + 1) % 3;
+    if (v[i0][axis] > v[i1][axis]) std::swap(i0, i1);
+    if (slab[i0] == slab[i1]) continue;  // no plane strictly between the endpoints
+    const Vec3 &p = v[i0], &q = v[i1];
+    const float pa = p[axis], qa = q[axis], den = qa - pa;
+    const bool tiny = !(den >= kTiny);
+    const float inv = tiny ? 0.f : 1.f / den;
+    Vec3 lo = vmin(p, q), hi = vmax(p, q), d = q - p, pad;
+    for (int k = 0; k < 3; ++k) pad[k] = std::max(std::fabs(p[k]), std::fabs(q[k])) * kPad + kAbs;
+    // Planes pl[slab[i0] + 1 .. slab[i1]] lie in (p_a, q_a]; one equal to q_a meets the edge at
+    // the vertex q, already in both slabs.
+    for (int k = slab[i0] + 1; k <= slab[i1]; ++k) {
+      const float w = pl[k];
+      if (!(w < qa)) continue;
+      AABB x;
+      const float t = (w - pa) * inv;
+      for (int c = 0; c < 3; ++c) {
+        if (c == axis) {
+          x.lo[c] = x.hi[c] = w;
+        } else if (tiny || d[c] == 0.f) {
+          x.lo[c] = lo[c];
+          x.hi[c] = hi[c];
+        } else {
+          const float cc = p[c] + t * d[c];
+          x.lo[c] = std::max(cc - pad[c], lo[c]);
+          x.hi[c] = std::min(cc + pad[c], hi[c]);
+        }
+      }
+      out[k - 1].grow(x);
+      out[k].grow(x);
     }
   }
 }
