@@ -272,45 +272,50 @@ class SpatialBuilder {
   // in every bin it spans it adds the bounds of its part clipped to that bin.
   Split spatial_split(const std::vector<SpatialRef>& refs, const AABB& box) {
     Split best;
-    std::vector<Bin>& bins = bins_;
     for (int a = 0; a < 3; ++a) {
       if (!(box.hi[a] - box.lo[a] > 0.f)) continue;
-      bins.assign(sbins_, Bin{});
-      const AxisBins ab(*this, box, a);
-      for (const auto& r : refs) {
-        const int b0 = ab.bin(r.box.lo[a]), b1 = ab.bin(r.box.hi[a]);
-        bins[b0].count++;
-        bins[b1].exits++;
-        if (b0 == b1) {
-          bins[b0].box.grow(r.box);
-          continue;
-        }
-        if (b1 - b0 + 1 > sp_.chop_max) {
-          // Many bins: the reference's box cut to each bin's slab, a superset of the exact part
-          // (the same for the axis-aligned floors and walls that span most bins) at no clipping
-          // cost; the split itself, if chosen, clips exactly (do_spatial).
-          for (int b = b0; b <= b1; ++b) {
-            AABB part = r.box;
-            part.lo[a] = std::max(part.lo[a], ab.pl[b]);
-            part.hi[a] = std::min(part.hi[a], ab.pl[b + 1]);
-            bins[b].box.grow(part);
-          }
-          continue;
-        }
-        // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
-        // same way): one float sweep of the triangle's edges through the planes (clip.h,
-        // chop_triangle_bounds, padded outward so each part is conservative), each part cut to
-        // the reference's box.
-        const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
-        chop_triangle_bounds(v, a, ab.pl + b0, b1 - b0 + 1, parts_);
-        for (int b = b0; b <= b1; ++b) {
-          const AABB part = intersect(parts_[b - b0], r.box);
-          if (!part.empty()) bins[b].box.grow(part);
-        }
-      }
-      sweep(bins, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
+      if (a == 0) spatial_bins<0>(refs, box);
+      else if (a == 1) spatial_bins<1>(refs, box);
+      else spatial_bins<2>(refs, box);
+      sweep(bins_, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
     }
     return best;
+  }
+  // The bins of one axis A (a template: constant coordinate accesses in the per-reference loop).
+  template <int A>
+  void spatial_bins(const std::vector<SpatialRef>& refs, const AABB& box) {
+    std::vector<Bin>& bins = bins_;
+    bins.assign(sbins_, Bin{});
+    const AxisBins ab(*this, box, A);
+    for (const auto& r : refs) {
+      const int b0 = ab.bin(r.box.lo[A]), b1 = ab.bin(r.box.hi[A]);
+      bins[b0].count++;
+      bins[b1].exits++;
+      if (b0 == b1) {
+        bins[b0].box.grow(r.box);
+        continue;
+      }
+      if (b1 - b0 + 1 > sp_.chop_max) {
+        // Many bins: the reference's box cut to each bin's slab, a superset of the exact part
+        // (the same for the axis-aligned floors and walls that span most bins) at no clipping
+        // cost; the split itself, if chosen, clips exactly (do_spatial).
+        for (int b = b0; b <= b1; ++b) {
+          AABB part = r.box;
+          part.lo[A] = std::max(part.lo[A], ab.pl[b]);
+          part.hi[A] = std::min(part.hi[A], ab.pl[b + 1]);
+          bins[b].box.grow(part);
+        }
+        continue;
+      }
+      // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
+      // same way): one float sweep of the triangle's edges through the planes (clip.h,
+      // chop_triangle_bounds, padded outward so each part is conservative), each part cut to
+      // the reference's box.
+      const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
+      chop_triangle_bounds(v, A, ab.pl + b0, b1 - b0 + 1, r.box, parts_);
+      for (int b = b0; b <= b1; ++b)
+        if (!parts_[b - b0].empty()) bins[b].box.grow(parts_[b - b0]);
+    }
   }
 
   // Distributes references for a spatial split; a straddling reference is split, or kept whole on
@@ -382,7 +387,7 @@ class SpatialBuilder {
   size_t used_ = 0;
   float root_area_ = 1.f;
   std::vector<Bin> bins_;
-  AABB parts_[257];  // spatial_split's chopped parts of one reference (sbins_ <= 256)
+  AABB parts_[kMaxChopSlabs];  // spatial_bins' chopped parts of one reference (sbins_ <= 256)
   std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;

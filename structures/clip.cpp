@@ -5,6 +5,8 @@
 #include <limits>
 #include <cmath>
 #include <utility>
+
+#include <immintrin.h>
 #include <cstdint>
 
 namespace tb {
@@ -173,51 +175,77 @@ void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AAB
 // required, so 1 / (q_a - p_a) cannot overflow and an underflowed w - p_a moves t by at most
 // 2^-50, i.e. c by 2^-49 M): FLT_MIN more covers it. Below 2^-100 the crossing is bounded by the
 // edge's own box (it lies on the edge), which is also the clamp for every crossing.
-void chop_triangle_bounds(const Vec3 v[3], int axis, const float* pl, int n, AABB* out) {
-  for (int i = 0; i < n; ++i) out[i] = AABB{};
+namespace {
+
+inline __m128 load3(Vec3 v) { return _mm_setr_ps(v.x, v.y, v.z, 0.f); }
+
+// The sweep for one axis A, in SSE: a box is a (lo, hi) pair of 4-float registers, growing and
+// clamping it one min and one max; the crossing's three coordinates are computed at once.
+template <int A>
+void chop_axis(const Vec3 v[3], const float* pl, int n, const AABB& clamp, AABB* out) {
+  constexpr float kTiny = 0x1p-100f, kPad = 0x1p-19f, kAbs = std::numeric_limits<float>::min();
+  constexpr int kAxisLane = 1 << A;
+  __m128 lo[kMaxChopSlabs], hi[kMaxChopSlabs];
+  const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY);
+  for (int i = 0; i < n; ++i) lo[i] = inf, hi[i] = ninf;
+  const __m128 p3[3] = {load3(v[0]), load3(v[1]), load3(v[2])};
   int slab[3];
   for (int j = 0; j < 3; ++j) {
     // Slab of the vertex: the last i with pl[i] <= x (i >= 1), else 0; on a plane it is in both.
-    const float x = v[j][axis];
-    const int i = int(std::upper_bound(pl + 1, pl + n, x) - pl) - 1;
+    const float x = v[j][A];
+    int i = 0;
+    if (n > 1) i = int(std::upper_bound(pl + 1, pl + n, x) - pl) - 1;
     slab[j] = i;
-    out[i].grow(v[j]);
-    if (i > 0 && pl[i] == x) out[i - 1].grow(v[j]);
+    lo[i] = _mm_min_ps(lo[i], p3[j]), hi[i] = _mm_max_ps(hi[i], p3[j]);
+    if (i > 0 && pl[i] == x) lo[i - 1] = _mm_min_ps(lo[i - 1], p3[j]), hi[i - 1] = _mm_max_ps(hi[i - 1], p3[j]);
   }
-  constexpr float kTiny = 0x1p-100f, kPad = 0x1p-19f, kAbs = std::numeric_limits<float>::min();
-  for (int j = 0; j < 3; ++j) {
-    int i0 = j, i1 = (j + 1) % 3;
-    if (v[i0][axis] > v[i1][axis]) std::swap(i0, i1);
-    if (slab[i0] == slab[i1]) continue;  // no plane strictly between the endpoints
-    const Vec3 &p = v[i0], &q = v[i1];
-    const float pa = p[axis], qa = q[axis], den = qa - pa;
-    const bool tiny = !(den >= kTiny);
-    const float inv = tiny ? 0.f : 1.f / den;
-    Vec3 lo = vmin(p, q), hi = vmax(p, q), d = q - p, pad;
-    for (int k = 0; k < 3; ++k) pad[k] = std::max(std::fabs(p[k]), std::fabs(q[k])) * kPad + kAbs;
-    // Planes pl[slab[i0] + 1 .. slab[i1]] lie in (p_a, q_a]; one equal to q_a meets the edge at
-    // the vertex q, already in both slabs.
-    for (int k = slab[i0] + 1; k <= slab[i1]; ++k) {
-      const float w = pl[k];
-      if (!(w < qa)) continue;
-      AABB x;
-      const float t = (w - pa) * inv;
-      for (int c = 0; c < 3; ++c) {
-        if (c == axis) {
-          x.lo[c] = x.hi[c] = w;
-        } else if (tiny || d[c] == 0.f) {
-          x.lo[c] = lo[c];
-          x.hi[c] = hi[c];
-        } else {
-          const float cc = p[c] + t * d[c];
-          x.lo[c] = std::max(cc - pad[c], lo[c]);
-          x.hi[c] = std::min(cc + pad[c], hi[c]);
-        }
+  if (slab[0] != slab[1] || slab[1] != slab[2]) {
+    const __m128 sign = _mm_set1_ps(-0.f);
+    for (int j = 0; j < 3; ++j) {
+      int i0 = j, i1 = j == 2 ? 0 : j + 1;
+      if (slab[i0] == slab[i1]) continue;  // no plane strictly between the endpoints
+      if (v[i0][A] > v[i1][A]) std::swap(i0, i1);
+      const float pa = v[i0][A], qa = v[i1][A], den = qa - pa;
+      const __m128 p = p3[i0], q = p3[i1], d = _mm_sub_ps(q, p);
+      const __m128 elo = _mm_min_ps(p, q), ehi = _mm_max_ps(p, q);
+      // The pad of the error bound above; an edge too short on the sweep axis gets an infinite
+      // one (t = 0), which the clamp turns into the edge's own bounds. Where d = 0 the crossing
+      // is p exactly and the clamp to [p, p] returns it.
+      const bool tiny = !(den >= kTiny);
+      const float inv = tiny ? 0.f : 1.f / den;
+      const __m128 mag = _mm_max_ps(_mm_andnot_ps(sign, p), _mm_andnot_ps(sign, q));
+      const __m128 pad = tiny ? inf : _mm_add_ps(_mm_mul_ps(mag, _mm_set1_ps(kPad)), _mm_set1_ps(kAbs));
+      // Planes pl[slab[i0] + 1 .. slab[i1]] lie in (p_a, q_a]; one equal to q_a meets the edge at
+      // the vertex q, already in both slabs.
+      for (int k = slab[i0] + 1; k <= slab[i1]; ++k) {
+        const float w = pl[k];
+        if (!(w < qa)) continue;
+        const __m128 c = _mm_add_ps(p, _mm_mul_ps(_mm_set1_ps((w - pa) * inv), d));
+        const __m128 wv = _mm_set1_ps(w);
+        const __m128 xl = _mm_blend_ps(_mm_max_ps(_mm_sub_ps(c, pad), elo), wv, kAxisLane);
+        const __m128 xh = _mm_blend_ps(_mm_min_ps(_mm_add_ps(c, pad), ehi), wv, kAxisLane);
+        lo[k - 1] = _mm_min_ps(lo[k - 1], xl), hi[k - 1] = _mm_max_ps(hi[k - 1], xh);
+        lo[k] = _mm_min_ps(lo[k], xl), hi[k] = _mm_max_ps(hi[k], xh);
       }
-      out[k - 1].grow(x);
-      out[k].grow(x);
     }
   }
+  const __m128 clo = load3(clamp.lo), chi = load3(clamp.hi);
+  for (int i = 0; i < n; ++i) {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, _mm_max_ps(lo[i], clo));
+    _mm_store_ps(h, _mm_min_ps(hi[i], chi));
+    out[i].lo = {l[0], l[1], l[2]};
+    out[i].hi = {h[0], h[1], h[2]};
+  }
+}
+
+}  // namespace
+
+void chop_triangle_bounds(const Vec3 v[3], int axis, const float* pl, int n, const AABB& clamp, AABB* out) {
+  n = std::clamp(n, 1, kMaxChopSlabs);
+  if (axis == 0) chop_axis<0>(v, pl, n, clamp, out);
+  else if (axis == 1) chop_axis<1>(v, pl, n, clamp, out);
+  else chop_axis<2>(v, pl, n, clamp, out);
 }
 
 }  // namespace tb
