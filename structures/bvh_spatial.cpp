@@ -61,7 +61,8 @@ class SpatialBuilder {
       stack.pop_back();
       bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth);
       const AABB box{bvh.nodes[t.node].lo, bvh.nodes[t.node].hi};
-      if (t.refs.size() < size_t(std::max(sp_.min_refs, 2)) && !has_large_ref(t.refs, box)) {
+      if (t.refs.size() < size_t(std::max(sp_.min_refs, 2)) &&
+          (t.refs.size() < size_t(sp_.large_min_refs) || !has_large_ref(t.refs, box))) {
         graft(bvh, t);
         continue;
       }
@@ -115,7 +116,7 @@ class SpatialBuilder {
 
   // A reference longer than half the node on some axis: where big triangles meet small ones (a
   // ground quad isolated with a few walls by the object splits above) spatial splits keep paying
-  // far below min_refs, so such subtrees are not handed off.
+  // far below min_refs, so such subtrees are not handed off, down to large_min_refs.
   static bool has_large_ref(const std::vector<SpatialRef>& refs, const AABB& box) {
     const Vec3 half = box.extent() * 0.5f;
     for (const auto& r : refs) {
@@ -287,6 +288,9 @@ class SpatialBuilder {
     std::vector<Bin>& bins = bins_;
     bins.assign(sbins_, Bin{});
     const AxisBins ab(*this, box, A);
+    // The chopped parts' boxes, apart from the bins (chop_triangle_bounds grows an AABB array).
+    AABB* sbox = parts_;
+    std::fill(sbox, sbox + sbins_, AABB{});
     for (const auto& r : refs) {
       const int b0 = ab.bin(r.box.lo[A]), b1 = ab.bin(r.box.hi[A]);
       bins[b0].count++;
@@ -312,10 +316,9 @@ class SpatialBuilder {
       // chop_triangle_bounds, padded outward so each part is conservative), each part cut to
       // the reference's box.
       const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
-      chop_triangle_bounds(v, A, ab.pl + b0, b1 - b0 + 1, r.box, parts_);
-      for (int b = b0; b <= b1; ++b)
-        if (!parts_[b - b0].empty()) bins[b].box.grow(parts_[b - b0]);
+      chop_triangle_bounds(v, A, ab.pl + b0, b1 - b0 + 1, r.box, sbox + b0);
     }
+    for (int b = 0; b < sbins_; ++b) bins[b].box.grow(sbox[b]);
   }
 
   // Distributes references for a spatial split; a straddling reference is split, or kept whole on
@@ -387,7 +390,7 @@ class SpatialBuilder {
   size_t used_ = 0;
   float root_area_ = 1.f;
   std::vector<Bin> bins_;
-  AABB parts_[kMaxChopSlabs];  // spatial_bins' chopped parts of one reference (sbins_ <= 256)
+  AABB parts_[kMaxChopSlabs];  // spatial_bins' boxes of the chopped parts (sbins_ <= 256)
   std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;

@@ -38,6 +38,11 @@ struct SpatialSplitParams {
   // references): spatial splits deep in the tree gain little SAH (sponza: 0.823 of the plain
   // SAH with 16, 0.825 with 64, 0.833 with 256) and cost the most build time.
   int min_refs = 64;
+  // ... unless it holds a reference longer than half the node on some axis (a large triangle
+  // among small ones, where spatial splits keep paying), down to this many references. Every
+  // subtree was kept (0) before: that built almost the whole tree with spatial binning, for no
+  // SAH gain on sponza, conference, crytek_sponza_partial and sibenik (docs/PERFORMANCE.md).
+  int large_min_refs = 32;
   // A reference spanning more spatial bins than this is binned as its box cut to each bin's slab
   // instead of being clipped at every plane (same SAH within 1% on sponza, 2-3x faster binning).
   int chop_max = 1000;

@@ -229,13 +229,16 @@ void chop_axis(const Vec3 v[3], const float* pl, int n, const AABB& clamp, AABB*
       }
     }
   }
+  // Cut to the clamp box; a part left empty (lo > hi on some axis) grows nothing.
   const __m128 clo = load3(clamp.lo), chi = load3(clamp.hi);
   for (int i = 0; i < n; ++i) {
-    alignas(16) float l[4], h[4];
-    _mm_store_ps(l, _mm_max_ps(lo[i], clo));
-    _mm_store_ps(h, _mm_min_ps(hi[i], chi));
-    out[i].lo = {l[0], l[1], l[2]};
-    out[i].hi = {h[0], h[1], h[2]};
+    const __m128 l = _mm_max_ps(lo[i], clo), h = _mm_min_ps(hi[i], chi);
+    if ((_mm_movemask_ps(_mm_cmple_ps(l, h)) & 7) != 7) continue;
+    alignas(16) float lf[4], hf[4];
+    _mm_store_ps(lf, _mm_min_ps(l, load3(out[i].lo)));
+    _mm_store_ps(hf, _mm_max_ps(h, load3(out[i].hi)));
+    out[i].lo = {lf[0], lf[1], lf[2]};
+    out[i].hi = {hf[0], hf[1], hf[2]};
   }
 }
 
