@@ -39,10 +39,14 @@ struct SpatialSplitParams {
   // SAH with 16, 0.825 with 64, 0.833 with 256) and cost the most build time.
   int min_refs = 64;
   // ... unless it holds a reference longer than half the node on some axis (a large triangle
-  // among small ones, where spatial splits keep paying), down to this many references. Every
-  // subtree was kept (0) before: that built almost the whole tree with spatial binning, for no
-  // SAH gain on sponza, conference, crytek_sponza_partial and sibenik (docs/PERFORMANCE.md).
-  int large_min_refs = 32;
+  // among small ones, where spatial splits keep paying), down to this many references. Keeping
+  // every such subtree (0, before) built almost the whole tree with spatial binning (sponza: the
+  // builder's split() ran on 82.6 k of its 88 k nodes); 8 keeps the trace work of conference's primary rays (16 or 32 lose 5% of
+  // node visits there) at 0.6x the instructions (docs/PERFORMANCE.md, spatial splits).
+  int large_min_refs = 8;
+  // Spatial bins per axis in such kept nodes (below min_refs): chopping their large reference
+  // over every bin is most of their cost; 8 gives the same SAH within 0.1% as 16.
+  int small_spatial_bins = 8;
   // A reference spanning more spatial bins than this is binned as its box cut to each bin's slab
   // instead of being clipped at every plane (same SAH within 1% on sponza, 2-3x faster binning).
   int chop_max = 1000;

@@ -179,64 +179,81 @@ namespace {
 
 inline __m128 load3(Vec3 v) { return _mm_setr_ps(v.x, v.y, v.z, 0.f); }
 
-// The sweep for one axis A, in SSE: a box is a (lo, hi) pair of 4-float registers, growing and
-// clamping it one min and one max; the crossing's three coordinates are computed at once.
+// The sweep for one axis A, in SSE (a box is a (lo, hi) pair of 4-float registers). With the
+// vertices sorted along A (a0 <= a1 <= a2), a plane a0 < w < a2 is crossed strictly by the long
+// edge v0-v2 and by v0-v1 (w < a1) or v1-v2 (w > a1); at w = a1 the short edges meet it at v1, a
+// vertex. The part in slab i is bounded by the crossings of its two planes and the vertices in
+// the closed slab, so one pass over the planes, carrying the lower plane's crossings, gives every
+// slab's box without a per-slab array.
 template <int A>
 void chop_axis(const Vec3 v[3], const float* pl, int n, const AABB& clamp, AABB* out) {
   constexpr float kTiny = 0x1p-100f, kPad = 0x1p-19f, kAbs = std::numeric_limits<float>::min();
   constexpr int kAxisLane = 1 << A;
-  __m128 lo[kMaxChopSlabs], hi[kMaxChopSlabs];
-  const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY);
-  for (int i = 0; i < n; ++i) lo[i] = inf, hi[i] = ninf;
-  const __m128 p3[3] = {load3(v[0]), load3(v[1]), load3(v[2])};
+  int o[3] = {0, 1, 2};
+  if (v[o[0]][A] > v[o[1]][A]) std::swap(o[0], o[1]);
+  if (v[o[1]][A] > v[o[2]][A]) std::swap(o[1], o[2]);
+  if (v[o[0]][A] > v[o[1]][A]) std::swap(o[0], o[1]);
+  const float a[3] = {v[o[0]][A], v[o[1]][A], v[o[2]][A]};
+  const __m128 P[3] = {load3(v[o[0]]), load3(v[o[1]]), load3(v[o[2]])};
+  const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY), sign = _mm_set1_ps(-0.f);
   int slab[3];
+  bool on[3];
   for (int j = 0; j < 3; ++j) {
     // Slab of the vertex: the last i with pl[i] <= x (i >= 1), else 0; on a plane it is in both.
-    const float x = v[j][A];
-    int i = 0;
-    if (n > 1) i = int(std::upper_bound(pl + 1, pl + n, x) - pl) - 1;
+    const int i = n > 1 ? int(std::upper_bound(pl + 1, pl + n, a[j]) - pl) - 1 : 0;
     slab[j] = i;
-    lo[i] = _mm_min_ps(lo[i], p3[j]), hi[i] = _mm_max_ps(hi[i], p3[j]);
-    if (i > 0 && pl[i] == x) lo[i - 1] = _mm_min_ps(lo[i - 1], p3[j]), hi[i - 1] = _mm_max_ps(hi[i - 1], p3[j]);
+    on[j] = i > 0 && pl[i] == a[j];
   }
-  if (slab[0] != slab[1] || slab[1] != slab[2]) {
-    const __m128 sign = _mm_set1_ps(-0.f);
-    for (int j = 0; j < 3; ++j) {
-      int i0 = j, i1 = j == 2 ? 0 : j + 1;
-      if (slab[i0] == slab[i1]) continue;  // no plane strictly between the endpoints
-      if (v[i0][A] > v[i1][A]) std::swap(i0, i1);
-      const float pa = v[i0][A], qa = v[i1][A], den = qa - pa;
-      const __m128 p = p3[i0], q = p3[i1], d = _mm_sub_ps(q, p);
-      const __m128 elo = _mm_min_ps(p, q), ehi = _mm_max_ps(p, q);
-      // The pad of the error bound above; an edge too short on the sweep axis gets an infinite
-      // one (t = 0), which the clamp turns into the edge's own bounds. Where d = 0 the crossing
-      // is p exactly and the clamp to [p, p] returns it.
-      const bool tiny = !(den >= kTiny);
-      const float inv = tiny ? 0.f : 1.f / den;
-      const __m128 mag = _mm_max_ps(_mm_andnot_ps(sign, p), _mm_andnot_ps(sign, q));
-      const __m128 pad = tiny ? inf : _mm_add_ps(_mm_mul_ps(mag, _mm_set1_ps(kPad)), _mm_set1_ps(kAbs));
-      // Planes pl[slab[i0] + 1 .. slab[i1]] lie in (p_a, q_a]; one equal to q_a meets the edge at
-      // the vertex q, already in both slabs.
-      for (int k = slab[i0] + 1; k <= slab[i1]; ++k) {
-        const float w = pl[k];
-        if (!(w < qa)) continue;
-        const __m128 c = _mm_add_ps(p, _mm_mul_ps(_mm_set1_ps((w - pa) * inv), d));
-        const __m128 wv = _mm_set1_ps(w);
-        const __m128 xl = _mm_blend_ps(_mm_max_ps(_mm_sub_ps(c, pad), elo), wv, kAxisLane);
-        const __m128 xh = _mm_blend_ps(_mm_min_ps(_mm_add_ps(c, pad), ehi), wv, kAxisLane);
-        lo[k - 1] = _mm_min_ps(lo[k - 1], xl), hi[k - 1] = _mm_max_ps(hi[k - 1], xh);
-        lo[k] = _mm_min_ps(lo[k], xl), hi[k] = _mm_max_ps(hi[k], xh);
+  struct Edge {
+    __m128 p, d, lo, hi, pad;
+    float pa, inv;
+  };
+  // The pad of the error bound above; an edge too short on the sweep axis gets an infinite one
+  // (t = 0), which the clamp to the edge's own bounds turns into those bounds. Where d = 0 the
+  // crossing is p exactly and the clamp to [p, p] returns it.
+  auto edge = [&](int i, int j) {
+    Edge e;
+    e.p = P[i];
+    e.d = _mm_sub_ps(P[j], P[i]);
+    e.lo = _mm_min_ps(P[i], P[j]);
+    e.hi = _mm_max_ps(P[i], P[j]);
+    e.pa = a[i];
+    const float den = a[j] - a[i];
+    const bool tiny = !(den >= kTiny);
+    e.inv = tiny ? 0.f : 1.f / den;
+    const __m128 mag = _mm_max_ps(_mm_andnot_ps(sign, P[i]), _mm_andnot_ps(sign, P[j]));
+    e.pad = tiny ? inf : _mm_add_ps(_mm_mul_ps(mag, _mm_set1_ps(kPad)), _mm_set1_ps(kAbs));
+    return e;
+  };
+  const Edge L = edge(0, 2), S0 = edge(0, 1), S1 = edge(1, 2);
+  auto cross = [&](const Edge& e, float w, __m128& xl, __m128& xh) {
+    const __m128 c = _mm_add_ps(e.p, _mm_mul_ps(_mm_set1_ps((w - e.pa) * e.inv), e.d));
+    const __m128 wv = _mm_set1_ps(w);
+    xl = _mm_min_ps(xl, _mm_blend_ps(_mm_max_ps(_mm_sub_ps(c, e.pad), e.lo), wv, kAxisLane));
+    xh = _mm_max_ps(xh, _mm_blend_ps(_mm_min_ps(_mm_add_ps(c, e.pad), e.hi), wv, kAxisLane));
+  };
+  const __m128 clo = load3(clamp.lo), chi = load3(clamp.hi);
+  __m128 lo_l = inf, lo_h = ninf;  // crossings of slab i's lower plane (none for slab 0)
+  for (int i = 0; i < n; ++i) {
+    __m128 up_l = inf, up_h = ninf;  // crossings of its upper plane pl[i + 1] (none for the last)
+    if (i + 1 < n) {
+      const float w = pl[i + 1];
+      if (w > a[0] && w < a[2]) {
+        cross(L, w, up_l, up_h);
+        if (w < a[1]) cross(S0, w, up_l, up_h);
+        else if (w > a[1]) cross(S1, w, up_l, up_h);
       }
     }
-  }
-  // Cut to the clamp box; a part left empty (lo > hi on some axis) grows nothing.
-  const __m128 clo = load3(clamp.lo), chi = load3(clamp.hi);
-  for (int i = 0; i < n; ++i) {
-    const __m128 l = _mm_max_ps(lo[i], clo), h = _mm_min_ps(hi[i], chi);
-    if ((_mm_movemask_ps(_mm_cmple_ps(l, h)) & 7) != 7) continue;
+    __m128 bl = _mm_min_ps(lo_l, up_l), bh = _mm_max_ps(lo_h, up_h);
+    for (int j = 0; j < 3; ++j)
+      if (slab[j] == i || (on[j] && slab[j] == i + 1)) bl = _mm_min_ps(bl, P[j]), bh = _mm_max_ps(bh, P[j]);
+    lo_l = up_l, lo_h = up_h;
+    // Cut to the clamp box; a part left empty (lo > hi on some axis) grows nothing.
+    bl = _mm_max_ps(bl, clo), bh = _mm_min_ps(bh, chi);
+    if ((_mm_movemask_ps(_mm_cmple_ps(bl, bh)) & 7) != 7) continue;
     alignas(16) float lf[4], hf[4];
-    _mm_store_ps(lf, _mm_min_ps(l, load3(out[i].lo)));
-    _mm_store_ps(hf, _mm_max_ps(h, load3(out[i].hi)));
+    _mm_store_ps(lf, _mm_min_ps(bl, load3(out[i].lo)));
+    _mm_store_ps(hf, _mm_max_ps(bh, load3(out[i].hi)));
     out[i].lo = {lf[0], lf[1], lf[2]};
     out[i].hi = {hf[0], hf[1], hf[2]};
   }
