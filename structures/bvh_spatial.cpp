@@ -190,21 +190,28 @@ class SpatialBuilder {
     cen_.resize(refs.size());
     AABB cb;
     for (size_t i = 0; i < refs.size(); ++i) cb.grow(cen_[i] = refs[i].box.centre());
-    std::vector<Bin>& bins = bins_;
-    for (int a = 0; a < 3; ++a) {
-      const float ext = cb.hi[a] - cb.lo[a];
-      if (!(ext > 0.f)) continue;
-      const float scale = obins_ / ext;
-      bins.assign(obins_, Bin{});
-      for (size_t i = 0; i < refs.size(); ++i) {
-        Bin& b = bins[obin(cen_[i][a], cb.lo[a], scale)];
-        b.box.grow(refs[i].box);
-        b.count++;
-      }
-      sweep(bins, a, Split::object, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.count; });
+    // The three axes' bins in one pass over the references (x, y, z named, not indexed: Vec3's
+    // operator[] is a branch chain).
+    const Vec3 ext = cb.extent();
+    const bool on[3] = {ext.x > 0.f, ext.y > 0.f, ext.z > 0.f};
+    const Vec3 scale{on[0] ? obins_ / ext.x : 0.f, on[1] ? obins_ / ext.y : 0.f, on[2] ? obins_ / ext.z : 0.f};
+    for (auto& bins : obins3_) bins.assign(obins_, Bin{});
+    for (size_t i = 0; i < refs.size(); ++i) {
+      const Vec3 c = cen_[i];
+      const AABB& box = refs[i].box;
+      Bin& bx = obins3_[0][obin(c.x, cb.lo.x, scale.x)];
+      Bin& by = obins3_[1][obin(c.y, cb.lo.y, scale.y)];
+      Bin& bz = obins3_[2][obin(c.z, cb.lo.z, scale.z)];
+      bx.box.grow(box), bx.count++;
+      by.box.grow(box), by.count++;
+      bz.box.grow(box), bz.count++;
     }
+    for (int a = 0; a < 3; ++a)
+      if (on[a])
+        sweep(obins3_[a], a, Split::object, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.count; });
     return best;
   }
+
 
   // Sweeps bins for the cheapest plane; `enter(b)` counts references on the left of a plane after
   // bin b, `leave(b)` those on the right before it.
@@ -398,6 +405,7 @@ class SpatialBuilder {
   size_t used_ = 0;
   float root_area_ = 1.f;
   std::vector<Bin> bins_;
+  std::vector<Bin> obins3_[3];  // object_split's bins per axis
   AABB parts_[kMaxChopSlabs];  // spatial_bins' boxes of the chopped parts (sbins_ <= 256)
   std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<float> right_area_;
