@@ -42,7 +42,8 @@ class SpatialBuilder {
  public:
   SpatialBuilder(const Scene& scene, const BVHBuildParams& p, const SpatialSplitParams& sp, size_t n)
       : scene_(scene), p_(p), sp_(sp), obins_(std::clamp(p.bins, 2, 256)),
-        sbins_all_(std::clamp(sp.spatial_bins, 2, 256)), sbins_(sbins_all_), max_leaf_(uint32_t(std::max(1, p.max_leaf))),
+        sbins_all_(std::clamp(sp.spatial_bins, 2, 256)), sbins_(sbins_all_),
+        max_leaf_(uint32_t(std::max(1, p.max_leaf))),
         budget_(size_t(double(std::max(0.f, sp.budget)) * double(n))) {}
 
   BVH run(std::vector<SpatialRef> refs) {
@@ -132,11 +133,11 @@ class SpatialBuilder {
     const uint32_t count = uint32_t(refs.size());
     if (count <= 1) return false;
     Split best = object_split(refs);
-    // Spatial splits only where the object split's children overlap noticeably (Stich §4.3) and
-    // the duplication budget is not spent.
     // Small nodes (those kept from the hand-off for a large reference) bin spatially with fewer
     // bins: the chopping of that reference over every bin is most of their cost.
     sbins_ = count < uint32_t(sp_.min_refs) ? std::clamp(sp_.small_spatial_bins, 2, sbins_all_) : sbins_all_;
+    // Spatial splits only where the object split's children overlap noticeably (Stich §4.3) and
+    // the duplication budget is not spent.
     if (used_ < budget_ && (best.kind == Split::none ||
                             intersect(best.left, best.right).area() > sp_.alpha * root_area_)) {
       const Split s = spatial_split(refs, box);
@@ -208,10 +209,10 @@ class SpatialBuilder {
     }
     for (int a = 0; a < 3; ++a)
       if (on[a])
-        sweep(obins3_[a], a, Split::object, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.count; });
+        sweep(obins3_[a], a, Split::object, best, [](const Bin& b) { return b.count; },
+              [](const Bin& b) { return b.count; });
     return best;
   }
-
 
   // Sweeps bins for the cheapest plane; `enter(b)` counts references on the left of a plane after
   // bin b, `leave(b)` those on the right before it.
@@ -399,7 +400,7 @@ class SpatialBuilder {
   const BVHBuildParams& p_;
   const SpatialSplitParams& sp_;
   const int obins_, sbins_all_;
-  int sbins_;  // spatial bins of the node being split: sbins_all_, or small_spatial_bins below min_refs
+  int sbins_;  // the node's spatial bins: sbins_all_, or small_spatial_bins below min_refs
   const uint32_t max_leaf_;
   const size_t budget_;
   size_t used_ = 0;
