@@ -42,7 +42,8 @@ class SpatialBuilder {
  public:
   SpatialBuilder(const Scene& scene, const BVHBuildParams& p, const SpatialSplitParams& sp, size_t n)
       : scene_(scene), p_(p), sp_(sp), obins_(std::clamp(p.bins, 2, 256)),
-        sbins_(std::clamp(sp.spatial_bins, 2, 256)), max_leaf_(uint32_t(std::max(1, p.max_leaf))),
+        sbins_all_(std::clamp(sp.spatial_bins, 2, 256)), sbins_(sbins_all_),
+        max_leaf_(uint32_t(std::max(1, p.max_leaf))),
         budget_(size_t(double(std::max(0.f, sp.budget)) * double(n))) {}
 
   BVH run(std::vector<SpatialRef> refs) {
@@ -61,7 +62,8 @@ class SpatialBuilder {
       stack.pop_back();
       bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth);
       const AABB box{bvh.nodes[t.node].lo, bvh.nodes[t.node].hi};
-      if (t.refs.size() < size_t(std::max(sp_.min_refs, 2)) && !has_large_ref(t.refs, box)) {
+      if (t.refs.size() < size_t(std::max(sp_.min_refs, 2)) &&
+          (t.refs.size() < size_t(sp_.large_min_refs) || !has_large_ref(t.refs, box))) {
         graft(bvh, t);
         continue;
       }
@@ -115,7 +117,7 @@ class SpatialBuilder {
 
   // A reference longer than half the node on some axis: where big triangles meet small ones (a
   // ground quad isolated with a few walls by the object splits above) spatial splits keep paying
-  // far below min_refs, so such subtrees are not handed off.
+  // far below min_refs, so such subtrees are not handed off, down to large_min_refs.
   static bool has_large_ref(const std::vector<SpatialRef>& refs, const AABB& box) {
     const Vec3 half = box.extent() * 0.5f;
     for (const auto& r : refs) {
@@ -131,6 +133,9 @@ class SpatialBuilder {
     const uint32_t count = uint32_t(refs.size());
     if (count <= 1) return false;
     Split best = object_split(refs);
+    // Small nodes (those kept from the hand-off for a large reference) bin spatially with fewer
+    // bins: the chopping of that reference over every bin is most of their cost.
+    sbins_ = count < uint32_t(sp_.min_refs) ? std::clamp(sp_.small_spatial_bins, 2, sbins_all_) : sbins_all_;
     // Spatial splits only where the object split's children overlap noticeably (Stich §4.3) and
     // the duplication budget is not spent.
     if (used_ < budget_ && (best.kind == Split::none ||
@@ -142,6 +147,10 @@ class SpatialBuilder {
     const float split_cost = p_.cost_traversal + p_.cost_intersect * best.cost / parent_area;
     const float leaf_cost = p_.cost_intersect * float(count);
     if (count <= max_leaf_ && (best.kind == Split::none || split_cost >= leaf_cost)) return false;
+    // Each side holds at most every reference once: one allocation each instead of a doubling
+    // series (allocation was a tenth of the build).
+    left.reserve(count);
+    right.reserve(count);
     if (best.kind == Split::spatial) {
       do_spatial(refs, box, best, left, right);
       // A split that could not separate anything (all references straddle and every one was
@@ -182,19 +191,26 @@ class SpatialBuilder {
     cen_.resize(refs.size());
     AABB cb;
     for (size_t i = 0; i < refs.size(); ++i) cb.grow(cen_[i] = refs[i].box.centre());
-    std::vector<Bin>& bins = bins_;
-    for (int a = 0; a < 3; ++a) {
-      const float ext = cb.hi[a] - cb.lo[a];
-      if (!(ext > 0.f)) continue;
-      const float scale = obins_ / ext;
-      bins.assign(obins_, Bin{});
-      for (size_t i = 0; i < refs.size(); ++i) {
-        Bin& b = bins[obin(cen_[i][a], cb.lo[a], scale)];
-        b.box.grow(refs[i].box);
-        b.count++;
-      }
-      sweep(bins, a, Split::object, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.count; });
+    // The three axes' bins in one pass over the references (x, y, z named, not indexed: Vec3's
+    // operator[] is a branch chain).
+    const Vec3 ext = cb.extent();
+    const bool on[3] = {ext.x > 0.f, ext.y > 0.f, ext.z > 0.f};
+    const Vec3 scale{on[0] ? obins_ / ext.x : 0.f, on[1] ? obins_ / ext.y : 0.f, on[2] ? obins_ / ext.z : 0.f};
+    for (auto& bins : obins3_) bins.assign(obins_, Bin{});
+    for (size_t i = 0; i < refs.size(); ++i) {
+      const Vec3 c = cen_[i];
+      const AABB& box = refs[i].box;
+      Bin& bx = obins3_[0][obin(c.x, cb.lo.x, scale.x)];
+      Bin& by = obins3_[1][obin(c.y, cb.lo.y, scale.y)];
+      Bin& bz = obins3_[2][obin(c.z, cb.lo.z, scale.z)];
+      bx.box.grow(box), bx.count++;
+      by.box.grow(box), by.count++;
+      bz.box.grow(box), bz.count++;
     }
+    for (int a = 0; a < 3; ++a)
+      if (on[a])
+        sweep(obins3_[a], a, Split::object, best, [](const Bin& b) { return b.count; },
+              [](const Bin& b) { return b.count; });
     return best;
   }
 
@@ -272,47 +288,52 @@ class SpatialBuilder {
   // in every bin it spans it adds the bounds of its part clipped to that bin.
   Split spatial_split(const std::vector<SpatialRef>& refs, const AABB& box) {
     Split best;
-    std::vector<Bin>& bins = bins_;
     for (int a = 0; a < 3; ++a) {
       if (!(box.hi[a] - box.lo[a] > 0.f)) continue;
-      bins.assign(sbins_, Bin{});
-      const AxisBins ab(*this, box, a);
-      for (const auto& r : refs) {
-        const int b0 = ab.bin(r.box.lo[a]), b1 = ab.bin(r.box.hi[a]);
-        bins[b0].count++;
-        bins[b1].exits++;
-        if (b0 == b1) {
-          bins[b0].box.grow(r.box);
-          continue;
-        }
-        if (b1 - b0 + 1 > sp_.chop_max) {
-          // Many bins: the reference's box cut to each bin's slab, a superset of the exact part
-          // (the same for the axis-aligned floors and walls that span most bins) at no clipping
-          // cost; the split itself, if chosen, clips exactly (do_spatial).
-          for (int b = b0; b <= b1; ++b) {
-            AABB part = r.box;
-            part.lo[a] = std::max(part.lo[a], ab.pl[b]);
-            part.hi[a] = std::min(part.hi[a], ab.pl[b + 1]);
-            bins[b].box.grow(part);
-          }
-          continue;
-        }
-        // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
-        // same way): the part left of plane b + 1 goes to bin b, the rest carries on.
-        const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
-        AABB rest = r.box;
-        for (int b = b0; b < b1; ++b) {
-          AABB l, rr;
-          split_ref(v, rest, a, ab.pl[b + 1], l, rr);
-          if (!l.empty()) bins[b].box.grow(l);
-          rest = rr;
-          if (rr.empty()) break;
-        }
-        if (!rest.empty()) bins[b1].box.grow(rest);
-      }
-      sweep(bins, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
+      if (a == 0) spatial_bins<0>(refs, box);
+      else if (a == 1) spatial_bins<1>(refs, box);
+      else spatial_bins<2>(refs, box);
+      sweep(bins_, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
     }
     return best;
+  }
+  // The bins of one axis A (a template: constant coordinate accesses in the per-reference loop).
+  template <int A>
+  void spatial_bins(const std::vector<SpatialRef>& refs, const AABB& box) {
+    std::vector<Bin>& bins = bins_;
+    bins.assign(sbins_, Bin{});
+    const AxisBins ab(*this, box, A);
+    // The chopped parts' boxes, apart from the bins (chop_triangle_bounds grows an AABB array).
+    AABB* sbox = parts_;
+    std::fill(sbox, sbox + sbins_, AABB{});
+    for (const auto& r : refs) {
+      const int b0 = ab.bin(r.box.lo[A]), b1 = ab.bin(r.box.hi[A]);
+      bins[b0].count++;
+      bins[b1].exits++;
+      if (b0 == b1) {
+        bins[b0].box.grow(r.box);
+        continue;
+      }
+      if (b1 - b0 + 1 > sp_.chop_max) {
+        // Many bins: the reference's box cut to each bin's slab, a superset of the exact part
+        // (the same for the axis-aligned floors and walls that span most bins) at no clipping
+        // cost; the split itself, if chosen, clips exactly (do_spatial).
+        for (int b = b0; b <= b1; ++b) {
+          AABB part = r.box;
+          part.lo[A] = std::max(part.lo[A], ab.pl[b]);
+          part.hi[A] = std::min(part.hi[A], ab.pl[b + 1]);
+          bins[b].box.grow(part);
+        }
+        continue;
+      }
+      // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
+      // same way): one float sweep of the triangle's edges through the planes (clip.h,
+      // chop_triangle_bounds, padded outward so each part is conservative), each part cut to
+      // the reference's box.
+      const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
+      chop_triangle_bounds(v, A, ab.pl + b0, b1 - b0 + 1, r.box, sbox + b0);
+    }
+    for (int b = 0; b < sbins_; ++b) bins[b].box.grow(sbox[b]);
   }
 
   // Distributes references for a spatial split; a straddling reference is split, or kept whole on
@@ -378,12 +399,15 @@ class SpatialBuilder {
   const Scene& scene_;
   const BVHBuildParams& p_;
   const SpatialSplitParams& sp_;
-  const int obins_, sbins_;
+  const int obins_, sbins_all_;
+  int sbins_;  // the node's spatial bins: sbins_all_, or small_spatial_bins below min_refs
   const uint32_t max_leaf_;
   const size_t budget_;
   size_t used_ = 0;
   float root_area_ = 1.f;
   std::vector<Bin> bins_;
+  std::vector<Bin> obins3_[3];  // object_split's bins per axis
+  AABB parts_[kMaxChopSlabs];  // spatial_bins' boxes of the chopped parts (sbins_ <= 256)
   std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;

@@ -15,7 +15,8 @@
 // (clip_triangle_bounds: double-precision Sutherland-Hodgman rounded outward), so the union of
 // the two parts' boxes contains the whole part of the triangle inside the parent's box. Node boxes
 // are the unions of their references' boxes. Every point of a triangle therefore lies in the box
-// of some leaf that references it and in all of that leaf's ancestors.
+// of some leaf that references it and in all of that leaf's ancestors. The binning's chopped parts
+// (clip.h chop_triangle_bounds, float, padded outward) only choose the plane.
 #pragma once
 #include <span>
 #include <vector>
@@ -38,8 +39,20 @@ struct SpatialSplitParams {
   // references): spatial splits deep in the tree gain little SAH (sponza: 0.823 of the plain
   // SAH with 16, 0.825 with 64, 0.833 with 256) and cost the most build time.
   int min_refs = 64;
+  // ... unless it holds a reference longer than half the node on some axis (a large triangle
+  // among small ones, where spatial splits keep paying), down to this many references. Keeping
+  // every such subtree (0, before) built almost the whole tree with spatial binning (sponza: the
+  // builder's split() ran on 82.6 k of its 88 k nodes); 8 keeps the trace work of conference's
+  // primary rays (16 or 32 visit 5% more nodes there) at 0.72x the instructions of 0
+  // (docs/PERFORMANCE.md, spatial splits).
+  int large_min_refs = 8;
+  // Spatial bins per axis in such kept nodes (below min_refs): chopping their large reference
+  // over every bin is most of their cost; 8 gives the same SAH within 0.1% as 16.
+  int small_spatial_bins = 8;
   // A reference spanning more spatial bins than this is binned as its box cut to each bin's slab
-  // instead of being clipped at every plane (same SAH within 1% on sponza, 2-3x faster binning).
+  // instead of being chopped at every plane. A cut box overestimates the part of a diagonal
+  // triangle, so no spatial split is found for it; since the chop is one float sweep
+  // (chop_triangle_bounds) the default never cuts.
   int chop_max = 1000;
 };
 

@@ -25,6 +25,17 @@ AABB clip_triangle_bounds(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
 // spatial-split BVH builder's reference split (Stich et al. 2009, structures/bvh_spatial.h).
 // A side the triangle does not reach gets an empty box.
 void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AABB& right);
+// Bounds of the parts of triangle v in consecutive slabs along `axis`, for the spatial-split
+// builder's chopped binning (Stich et al. 2009 §4.1): out[i], i = 0..n-1, is grown by the bounds
+// of the triangle's part in the closed slab pl[i] <= x[axis] <= pl[i + 1], except that slab 0 reaches
+// down to -inf and slab n-1 up to +inf (pl[0] and pl[n] are not read), intersected with `clamp`
+// (the box of the reference being chopped, which lies inside [pl[0], pl[n]]). pl ascending,
+// 1 <= n <= kMaxChopSlabs. One sweep of the three edges through the planes, O(n + 3) (an exact
+// clip per plane would be O(3n)), in float, every edge crossing padded outward by a proven bound
+// (clip.cpp), so each out[i] contains the exact part: conservative, never tighter than the truth.
+// A slab the triangle misses, or whose part misses `clamp`, leaves out[i] as it was.
+constexpr int kMaxChopSlabs = 256;
+void chop_triangle_bounds(const Vec3 v[3], int axis, const float* pl, int n, const AABB& clamp, AABB* out);
 // Area of the triangle clipped to the closed box, in double (for tests and statistics).
 double clipped_triangle_area(Vec3 a, Vec3 b, Vec3 c, const AABB& box);
 

@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
+#include <vector>
 
 #include "structures/clip.h"
 #include "test_geometry.h"
@@ -209,6 +211,68 @@ TEST(Clip, RandomTrianglesSliversAndOffsets) {
     }
     EXPECT_EQ(disagree, 0) << "overlap decision differs from the separating axis test";
     EXPECT_GT(overlapping, 300);
+  }
+}
+
+// The spatial-split builder's float sweep (chop_triangle_bounds) against the exact clipper, slab
+// by slab: each part holds the exact clip of its slab (and every sampled point of it), stays
+// within the slab, the clamp box and the triangle's bounds, and, unclamped, is empty exactly when
+// the slab misses the triangle and at most the proven pad (2^-19 of the coordinates' magnitude)
+// looser than the exact clip.
+TEST(Clip, ChopMatchesSlabClips) {
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> U(-1.f, 1.f);
+  std::uniform_int_distribution<int> N(1, 16);
+  for (const float offset : {0.f, 1e5f, -3e5f}) {
+    SCOPED_TRACE(::testing::Message() << "offset " << offset);
+    const float scale = offset == 0.f ? 1.f : 64.f;
+    int nonempty = 0, on_plane = 0;
+    for (int i = 0; i < 2000; ++i) {
+      const Vec3 o{offset, offset, offset};
+      Vec3 v[3];
+      for (auto& p : v) p = o + Vec3{U(rng), U(rng), U(rng)} * scale;
+      const int axis = i % 3;
+      if (i % 5 == 1) v[2] = v[0] + (v[1] - v[0]) * 0.37f + Vec3{U(rng), U(rng), U(rng)} * (1e-6f * scale);  // sliver
+      if (i % 5 == 2) v[1][(axis + 1) % 3] = v[0][(axis + 1) % 3];  // an edge parallel to a box plane
+      if (i % 5 == 3) v[2][axis] = v[1][axis];  // an edge in a plane of the sweep axis
+      AABB tri;
+      for (const auto& p : v) tri.grow(p);
+      const int n = N(rng);
+      // Planes over a range a little wider than the triangle's, some moved onto a vertex.
+      std::vector<float> pl(n + 1);
+      const float lo = tri.lo[axis] - 0.1f * scale, hi = tri.hi[axis] + 0.1f * scale;
+      for (int k = 0; k <= n; ++k) pl[k] = lo + (hi - lo) * (float(k) / float(n));
+      if (n > 2 && i % 4 == 0) pl[1 + i / 4 % (n - 1)] = v[i % 3][axis], ++on_plane;
+      std::sort(pl.begin(), pl.end());
+      if (std::adjacent_find(pl.begin(), pl.end()) != pl.end()) continue;
+      // Clamped to the triangle's bounds (a no-op) or, every other time, to a box that cuts it.
+      AABB clampbox = tri;
+      if (i % 2) clampbox.hi[(axis + 1) % 3] = 0.5f * (tri.lo[(axis + 1) % 3] + tri.hi[(axis + 1) % 3]);
+      std::vector<AABB> out(n);
+      chop_triangle_bounds(v, axis, pl.data(), n, clampbox, out.data());
+      for (int k = 0; k < n; ++k) {
+        AABB slab = clampbox;
+        if (k > 0) slab.lo[axis] = pl[k];
+        if (k < n - 1) slab.hi[axis] = pl[k + 1];
+        const AABB exact = clip_triangle_bounds(v[0], v[1], v[2], slab);
+        SCOPED_TRACE(::testing::Message() << "triangle " << i << " slab " << k << " of " << n);
+        // Clamped, the part's bounds cut to the box may hold points of no part: only one way.
+        if (i % 2 == 0) ASSERT_EQ(out[k].empty(), exact.empty());
+        if (exact.empty()) continue;
+        ASSERT_FALSE(out[k].empty());
+        ++nonempty;
+        EXPECT_TRUE(out[k].contains(exact)) << "part tighter than the exact clip";
+        check_clip(v[0], v[1], v[2], slab, out[k]);
+        for (int c = 0; c < 3 && i % 2 == 0; ++c) {
+          const float m = std::max(std::fabs(tri.lo[c]), std::fabs(tri.hi[c]));
+          const float tol = 2 * 0x1p-19f * m + 2 * std::numeric_limits<float>::min();
+          EXPECT_GE(out[k].lo[c], exact.lo[c] - tol) << "axis " << c;
+          EXPECT_LE(out[k].hi[c], exact.hi[c] + tol) << "axis " << c;
+        }
+      }
+    }
+    EXPECT_GT(nonempty, 4000);
+    EXPECT_GT(on_plane, 200);
   }
 }
 
