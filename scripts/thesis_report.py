@@ -12,6 +12,7 @@ are checked too (the "thesis" column), so a claim the thesis' table itself contr
 """
 import argparse
 import csv
+import math
 import os
 import sys
 
@@ -529,12 +530,68 @@ def simt(R):
         R.out()
 
 
+def pathtrace(R):
+    R.out("## Tables 14–15 — path-tracing schemes, error against time (CPU, one thread; docs/PATHTRACE.md)")
+    t = ref("table14_15_path_tracing_schemes.csv")
+    for s in scenes_with("pathtrace"):
+        rows = ours(s, "pathtrace")
+        if not rows:
+            continue
+        scheme = rows[0]["scheme"]
+        rows = [r for r in rows if r["scheme"] == scheme]
+        by = {(r["method"], r["spp"]): r for r in rows}
+        th = {(x["method"], x["spp"]): x for x in t if x["scene"] == s}
+        R.out(f"### {s} ({scheme}, {rows[0]['width']}x{rows[0]['height']}, converged image "
+              f"{rows[0]['converged_spp']} spp)" + ("" if th else " (no thesis counterpart)") + "\n")
+        R.out(md_table(["method", "spp", "ms", "rmse", "Mrays/s", "util", "warp_util", "efficiency rank",
+                        "thesis ms", "thesis rmse", "thesis Mrays/s"],
+                       [[r["method"], r["spp"], f(num(r["ms"]), 0), f(num(r["rmse"]), 2), f(num(r["mrays"]), 2),
+                         f(num(r["util"]), 2), f(num(r["warp_util"]), 2), r["efficiency_rank"],
+                         r.get("thesis_ms", ""), r.get("thesis_rmse", ""), r.get("thesis_mrays", "")] for r in rows]))
+        R.out()
+        nc = None if th else "nocounterpart"
+        spps = sorted({int(r["spp"]) for r in rows})
+        lo, hi = str(spps[0]), str(spps[-1])
+        for m in ("Ref", "PR", "SPT", "RIS", "RIS/MIS"):
+            if (m, lo) in by and (m, hi) in by and lo != hi:
+                slope = math.log(num(by[(m, hi)]["rmse"]) / num(by[(m, lo)]["rmse"])) / math.log(int(hi) / int(lo))
+                R.check("t14.sqrt_spp", f"{s}: {m}'s rmse falls as spp^-1/2 ({lo}→{hi} spp, slope in [-0.6, -0.4])",
+                        -0.6 <= slope <= -0.4, f"slope {slope:.2f}", nc)
+        for spp in spps:
+            four = [by.get((m, str(spp))) for m in ("Ref", "PR", "DPT", "SPT")]
+            if all(four):
+                worst = max(four, key=lambda r: num(r["rmse"]))["method"]
+                R.check("t14.dpt_highest", f"{s}: DPT's rmse is the highest of Ref/PR/DPT/SPT at {spp} spp",
+                        worst == "DPT", "highest: " + worst + " (" + ", ".join(
+                            f"{r['method']} {f(num(r['rmse']), 2)}" for r in four) + ")", nc)
+        sp = str(spps[0])
+        if all((m, sp) in by for m in ("Ref", "PR", "SPT")):
+            u = {m: num(by[(m, sp)]["util"]) for m in ("Ref", "PR", "SPT")}
+            R.check("t14.util", f"{s}: SPT and PR keep more lanes active than Ref ({sp} spp)",
+                    u["SPT"] > u["Ref"] and u["PR"] > u["Ref"], ", ".join(f"{m} {v:.2f}" for m, v in u.items()), nc)
+        # Efficiency 1 / (rmse^2 t) ranking among Table 14's methods, ours against the thesis'.
+        for spp in spps:
+            key = [(m, str(spp)) for m in ("Ref", "PR", "DPT", "SPT")]
+            if not all(k in by for k in key):
+                continue
+            mine = sorted(key, key=lambda k: -num(by[k]["efficiency"]))
+            order = " > ".join(k[0] for k in mine)
+            if all(k in th for k in key):
+                eff = {k: 1 / (num(th[k]["rmse"]) ** 2 * num(th[k]["ms"])) for k in key}
+                theirs = " > ".join(k[0] for k in sorted(key, key=lambda k: -eff[k]))
+                R.check("t14.best", f"{s}: the most efficient of Table 14's methods at {spp} spp is the thesis' (SPT)",
+                        mine[0][0] == sorted(key, key=lambda k: -eff[k])[0][0], f"ours {order}; thesis {theirs}")
+            else:
+                R.out(f"- {s}, {spp} spp: efficiency ours {order} (no thesis values at this spp)")
+        R.out()
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(RESULTS, "THESIS.md"))
     a = ap.parse_args()
     R = Report()
-    for part in (table1, divergence, bounce, raygrid, cache, simt):
+    for part in (table1, divergence, bounce, raygrid, cache, simt, pathtrace):
         part(R)
     n_ok = sum(1 for ok, _ in R.checks if ok)
     n_bad = len(R.checks) - n_ok
