@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <map>
 #include <numbers>
 
@@ -346,6 +347,12 @@ class Wavefront {
   std::vector<uint32_t> shadow_pixel_;
 };
 
+double thread_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
 bool any_active(const std::vector<Path>& lanes) {
   return std::any_of(lanes.begin(), lanes.end(), [](const Path& p) { return p.active; });
 }
@@ -416,6 +423,7 @@ PtImage render_pathtrace(const Scene& scene, const Traverser& tracer, const Ligh
   if (opt.ris_per_light == 0) throw InputError("RIS needs at least one candidate per light");
   PtStats stats;
   const auto t0 = std::chrono::steady_clock::now();
+  const double c0 = thread_cpu_seconds();
   Wavefront wf(scene, tracer, lighting, method, opt, stats);
   // Lanes are pixels in the 16x16 tiles of the thesis' packet layout (Fig. 16): one tile is one
   // packet (and 8 warps of 32 lanes); primary_rays gives that order.
@@ -468,6 +476,7 @@ PtImage render_pathtrace(const Scene& scene, const Traverser& tracer, const Ligh
     }
   }
   stats.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  stats.cpu_s = thread_cpu_seconds() - c0;
   if (stats_out) *stats_out = stats;
   return wf.image(opt.spp);
 }

@@ -82,6 +82,8 @@ struct PtStats {
   uint64_t warp_slots = 0, warp_active = 0;
   uint64_t iterations = 0;
   double trace_s = 0, total_s = 0;
+  // The rendering thread's CPU time: on a shared machine wall time mostly measures the other load.
+  double cpu_s = 0;
   double util() const { return ext_packets ? double(ext_rays) / double(ext_packets * kPtPacket) : 0; }
   double shadow_util() const {
     return shadow_packets ? double(shadow_rays) / double(shadow_packets * kPtPacket) : 0;

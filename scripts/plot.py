@@ -386,9 +386,10 @@ def plot_pathtrace(path):
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
     for m in methods:
         mr = sorted((r for r in mine if r["method"] == m), key=lambda r: num(r, "spp"))
-        axes[0].plot([num(r, "ms") for r in mr], [num(r, "rmse") for r in mr], "-o", ms=4, color=cols[m], label=m)
+        t = "cpu_ms" if "cpu_ms" in mr[0] else "ms"
+        axes[0].plot([num(r, t) for r in mr], [num(r, "rmse") for r in mr], "-o", ms=4, color=cols[m], label=m)
         for r in mr:
-            axes[0].annotate(r["spp"], (num(r, "ms"), num(r, "rmse")), fontsize=6, xytext=(2, 2),
+            axes[0].annotate(r["spp"], (num(r, t), num(r, "rmse")), fontsize=6, xytext=(2, 2),
                              textcoords="offset points")
         th = [(num(r, "thesis_ms"), num(r, "thesis_rmse")) for r in mr if not math.isnan(num(r, "thesis_ms"))]
         if th:
@@ -403,7 +404,7 @@ def plot_pathtrace(path):
     axes[2].set_xticklabels(methods, fontsize=8)
     spp0 = mine[0]["spp"] if mine else ""
     for ax, title, xl, yl in ((axes[0], f"ours: {scheme}, 1 thread, {mine[0]['width']}x{mine[0]['height']}" if mine else "",
-                               "ms per frame (log)", "rmse vs converged (log)"),
+                               "CPU ms per frame (log)", "rmse vs converged (log)"),
                               (axes[1], "thesis Tables 14-15 (two GTX470, 512x512)", "ms per frame (log)",
                                "rmse (log)"),
                               (axes[2], f"active lanes, extension rays ({spp0} spp)", "", "fraction of lanes")):

@@ -85,12 +85,12 @@ EXPLAIN = {
         "SPT (one estimator) spread by up to 22% in rmse; DPT's higher variance shows at albedo 0.8 "
         "(tests/test_pathtrace.cpp: > 1.2x Ref's per-pixel variance)."),
     "t14.best": (
-        "measured: DPT's frame takes a third of Ref's (Sponza 8 spp: 503 vs 1547 ms) — it traces fewer rays per "
-        "sample (truncation after log2(spp)+1 segments, column rays_per_sample) in full packets, so mbvh_rs runs "
-        "at ~2x Ref's Mrays/s (3.1 vs 1.4, util 0.98 vs 0.20) — while its rmse stays within the noise of Ref's in "
-        "these all-diffuse scenes (t14.dpt_highest). SPT, the thesis' winner, is second: full packets too "
-        "(2.6 Mrays/s) but Ref's ray count. The thesis' scenes have specular and glass materials, where DPT's "
-        "fixed 50% termination costs variance."),
+        "measured: DPT's frame takes half of Ref's CPU time (Sponza 8 spp: cpu_ms 381 vs 728) — it traces fewer "
+        "rays per sample (rays_per_sample 2.98 vs 4.09: truncation after log2(spp)+1 segments) in full packets "
+        "of one depth (util 0.98 vs 0.20) — while its rmse stays within the noise of Ref's in these all-diffuse "
+        "scenes (t14.dpt_highest). SPT, the thesis' winner, is second: full packets too (cpu_ms 692), but Ref's "
+        "ray count. Per ray traced (no timer, efficiency_rays) the order is the rmse noise's. The thesis' scenes "
+        "have specular and glass materials, where DPT's fixed 50% termination costs variance."),
     "t1.threads_rebuild_more": (
         "documented: Table 1 is not yet run as the thesis ran it (issue 18, part 2): ours times one `spheres:N` "
         "mesh with plain binned SAH on 1 and 2 threads of the shared 2-core VM (results/README.md), the thesis a "
@@ -564,9 +564,10 @@ def pathtrace(R):
         th = {(x["method"], x["spp"]): x for x in t if x["scene"] == s}
         R.out(f"### {s} ({scheme}, {rows[0]['width']}x{rows[0]['height']}, converged image "
               f"{rows[0]['converged_spp']} spp)" + ("" if th else " (no thesis counterpart)") + "\n")
-        R.out(md_table(["method", "spp", "ms", "rmse", "Mrays/s", "util", "warp_util", "efficiency rank",
+        R.out(md_table(["method", "spp", "CPU ms", "rmse", "Mrays/s", "util", "warp_util", "efficiency rank",
                         "thesis ms", "thesis rmse", "thesis Mrays/s"],
-                       [[r["method"], r["spp"], f(num(r["ms"]), 0), f(num(r["rmse"]), 2), f(num(r["mrays"]), 2),
+                       [[r["method"], r["spp"], f(num(r.get("cpu_ms", r["ms"])), 0), f(num(r["rmse"]), 2),
+                         f(num(r["mrays"]), 2),
                          f(num(r["util"]), 2), f(num(r["warp_util"]), 2), r["efficiency_rank"],
                          r.get("thesis_ms", ""), r.get("thesis_rmse", ""), r.get("thesis_mrays", "")] for r in rows]))
         R.out()
@@ -597,6 +598,9 @@ def pathtrace(R):
                 continue
             mine = sorted(key, key=lambda k: -num(by[k]["efficiency"]))
             order = " > ".join(k[0] for k in mine)
+            if "efficiency_rays" in by[key[0]]:
+                order += " (per ray traced, no timer: " + " > ".join(
+                    k[0] for k in sorted(key, key=lambda k: -num(by[k]["efficiency_rays"]))) + ")"
             if all(k in th for k in key):
                 eff = {k: 1 / (num(th[k]["rmse"]) ** 2 * num(th[k]["ms"])) for k in key}
                 theirs = " > ".join(k[0] for k in sorted(key, key=lambda k: -eff[k]))
