@@ -85,10 +85,10 @@ EXPLAIN = {
         "SPT (one estimator) spread by up to 22% in rmse; DPT's higher variance shows at albedo 0.8 "
         "(tests/test_pathtrace.cpp: > 1.2x Ref's per-pixel variance)."),
     "t14.best": (
-        "measured: DPT's frame takes half of Ref's CPU time (Sponza 8 spp: cpu_ms 381 vs 728) — it traces fewer "
+        "measured: DPT's frame takes half of Ref's CPU time (Sponza 8 spp: cpu_ms 390 vs 772) — it traces fewer "
         "rays per sample (rays_per_sample 2.98 vs 4.09: truncation after log2(spp)+1 segments) in full packets "
         "of one depth (util 0.98 vs 0.20) — while its rmse stays within the noise of Ref's in these all-diffuse "
-        "scenes (t14.dpt_highest). SPT, the thesis' winner, is second: full packets too (cpu_ms 692), but Ref's "
+        "scenes (t14.dpt_highest). SPT, the thesis' winner, is second: full packets too (cpu_ms 715), but Ref's "
         "ray count. Per ray traced (no timer, efficiency_rays) the order is the rmse noise's. The thesis' scenes "
         "have specular and glass materials, where DPT's fixed 50% termination costs variance."),
     "t1.threads_rebuild_more": (
