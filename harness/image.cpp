@@ -197,12 +197,17 @@ void write_cost_png(const std::string& path, const CostImage& img, const std::st
   cv.text(int(img.width) / 2 - int(mid.size()) * kCharW / 2, y0 + 32, mid, ink);
   cv.text(std::max(bar_x0 + 3 * kCharW, bar_x1 - int(hi.size()) * kCharW), y0 + 32, hi, ink);
 
+  write_rgb_png(path, cv.w, cv.h, cv.rgb);
+}
+
+void write_rgb_png(const std::string& path, uint32_t width, uint32_t height, const std::vector<uint8_t>& rgb) {
+  if (rgb.size() != size_t(width) * height * 3) throw std::logic_error("write_rgb_png: buffer size");
   png_image out{};
   out.version = PNG_IMAGE_VERSION;
-  out.width = cv.w;
-  out.height = cv.h;
+  out.width = width;
+  out.height = height;
   out.format = PNG_FORMAT_RGB;
-  if (!png_image_write_to_file(&out, path.c_str(), 0, cv.rgb.data(), 0, nullptr))
+  if (!png_image_write_to_file(&out, path.c_str(), 0, rgb.data(), 0, nullptr))
     throw InputError(path + ": cannot write PNG (" + std::string(out.message) + ")");
 }
 

@@ -44,6 +44,10 @@ CostImage cost_image(Bench& bench, const ImageOptions& opt);
 // outlier does not flatten the map) with its labels, and the legend line `title`.
 void write_cost_png(const std::string& path, const CostImage& img, const std::string& title, bool grey);
 
+// An 8-bit RGB image (row-major, 3 bytes a pixel) as PNG through libpng; InputError when the file
+// cannot be written. write_cost_png and the path tracer's images (harness/pathtrace) use it.
+void write_rgb_png(const std::string& path, uint32_t width, uint32_t height, const std::vector<uint8_t>& rgb);
+
 // The whole command: cost_image + write_cost_png.
 void run_image(Bench& bench, const ImageOptions& opt, const std::string& scene_label);
 

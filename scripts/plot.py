@@ -375,7 +375,58 @@ def plot_simt(path):
     print(f"wrote {path.with_suffix('.png')}")
 
 
+def plot_pathtrace(path):
+    """Tables 14-15 (thesis §6.3-6.4, Fig. 38/40): rmse against time per path-tracing method, ours
+    (one CPU core) beside the thesis' (two GTX470s), and each method's lane utilisation."""
+    rows = read(path)
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    scheme = rows[0]["scheme"] if rows else ""
+    mine = [r for r in rows if r["scheme"] == scheme]
+    cols = {m: plt.get_cmap("tab10").colors[i % 10] for i, m in enumerate(methods)}
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    for m in methods:
+        mr = sorted((r for r in mine if r["method"] == m), key=lambda r: num(r, "spp"))
+        t = "cpu_ms" if "cpu_ms" in mr[0] else "ms"
+        axes[0].plot([num(r, t) for r in mr], [num(r, "rmse") for r in mr], "-o", ms=4, color=cols[m], label=m)
+        for r in mr:
+            axes[0].annotate(r["spp"], (num(r, t), num(r, "rmse")), fontsize=6, xytext=(2, 2),
+                             textcoords="offset points")
+        th = [(num(r, "thesis_ms"), num(r, "thesis_rmse")) for r in mr if not math.isnan(num(r, "thesis_ms"))]
+        if th:
+            axes[1].plot([p[0] for p in th], [p[1] for p in th], "--o", ms=5, color=cols[m], mfc="none", label=m)
+    xs = range(len(methods))
+    w = 0.38
+    u = [num(next(r for r in mine if r["method"] == m), "util") for m in methods]
+    wu = [num(next(r for r in mine if r["method"] == m), "warp_util") for m in methods]
+    axes[2].bar([x - w / 2 for x in xs], u, w, color="tab:blue", label="util (256-ray packets)")
+    axes[2].bar([x + w / 2 for x in xs], wu, w, color="tab:orange", label="warp_util (32 lanes, modelled)")
+    axes[2].set_xticks(list(xs))
+    axes[2].set_xticklabels(methods, fontsize=8)
+    spp0 = mine[0]["spp"] if mine else ""
+    for ax, title, xl, yl in ((axes[0], f"ours: {scheme}, 1 thread, {mine[0]['width']}x{mine[0]['height']}" if mine else "",
+                               "CPU ms per frame (log)", "rmse vs converged (log)"),
+                              (axes[1], "thesis Tables 14-15 (two GTX470, 512x512)", "ms per frame (log)",
+                               "rmse (log)"),
+                              (axes[2], f"active lanes, extension rays ({spp0} spp)", "", "fraction of lanes")):
+        ax.set_title(title, fontsize=10)
+        ax.set_xlabel(xl)
+        ax.set_ylabel(yl)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes[:2]:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+    if not axes[1].lines:
+        axes[1].text(0.5, 0.5, "no thesis values for this scene", ha="center", transform=axes[1].transAxes)
+    fig.suptitle(f"{rows[0]['scene'] if rows else ''}: path-tracing schemes, error against time (thesis §6.3-6.4)")
+    fig.tight_layout()
+    fig.savefig(path.with_suffix(".png"), dpi=110)
+    plt.close(fig)
+    print(f"wrote {path.with_suffix('.png')}")
+
+
 PLOTTERS = {
+    "pathtrace": plot_pathtrace,
     "simt": plot_simt,
     "run": plot_run,
     "accuracy": plot_accuracy,

@@ -174,6 +174,10 @@ TEST_F(BadInput, OptionValuesAreValidatedAndNamed) {
       {"trace --scene room --scheme bvh_single --rays x --hits " + path("h.bin") + " --param stream=8",
        {"stream", "scheme bvh_single"}},
       {"table raygrid --param sweep=2" + csv, {"sweep=2"}},
+      // table pathtrace (issue 22): its own parameters' ranges and their relation.
+      {"table pathtrace --scene room --param min_spp=0" + csv, {"min_spp=0", "[1, 4096]"}},
+      {"table pathtrace --scene room --param ref_spp=x" + csv, {"ref_spp=x", "integer"}},
+      {"table pathtrace --scene room --param min_spp=16 --param max_spp=8" + csv, {"min_spp", "max_spp"}},
       // Options a subcommand does not use are not offered.
       {rays + " --reps 3", {"--reps"}},
       {rays + " --kernel moller", {"--kernel"}},

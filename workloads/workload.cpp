@@ -89,18 +89,14 @@ CameraView camera_view(const Scene& scene, const WorkloadSpec& spec) {
   return v;
 }
 
+}  // namespace
+
 // Orthonormal basis around n (Duff et al. 2017).
 void basis(Vec3 n, Vec3& t, Vec3& b) {
   const float s = std::copysign(1.f, n.z);
   const float a = -1.f / (s + n.z), c = n.x * n.y * a;
   t = {1.f + s * n.x * n.x * a, s * c, -s * n.x};
   b = {c, s + n.y * n.y * a, -n.y};
-}
-
-Vec3 uniform_sphere(Rng& rng) {
-  const float z = 1.f - 2.f * rng.uniform(), phi = 2.f * std::numbers::pi_v<float> * rng.uniform();
-  const float r = std::sqrt(std::max(0.f, 1.f - z * z));
-  return {r * std::cos(phi), r * std::sin(phi), z};
 }
 
 // Cosine-weighted direction around n (Malley's method).
@@ -112,11 +108,6 @@ Vec3 cosine_hemisphere(Vec3 n, Rng& rng) {
   return normalize(t * x + b * y + n * z);
 }
 
-// A point on a surface and its geometric normal, from a hit's barycentrics.
-struct SurfacePoint {
-  Vec3 p, n;
-  float eps;  // offset that clears the surface: relative to the triangle's size and position
-};
 SurfacePoint surface_point(const Scene& s, uint32_t tri, float u, float v) {
   const Vec3 a = s.vertex(tri, 0), b = s.vertex(tri, 1), c = s.vertex(tri, 2);
   SurfacePoint sp;
@@ -128,6 +119,14 @@ SurfacePoint surface_point(const Scene& s, uint32_t tri, float u, float v) {
   const float mag = std::max(std::max(std::fabs(sp.p.x), std::fabs(sp.p.y)), std::fabs(sp.p.z));
   sp.eps = std::max(1e-4f * size, 4e-6f * mag);
   return sp;
+}
+
+namespace {
+
+Vec3 uniform_sphere(Rng& rng) {
+  const float z = 1.f - 2.f * rng.uniform(), phi = 2.f * std::numbers::pi_v<float> * rng.uniform();
+  const float r = std::sqrt(std::max(0.f, 1.f - z * z));
+  return {r * std::cos(phi), r * std::sin(phi), z};
 }
 
 RayBatch trace_reference(const ClosestHitFn& reference, const RayBatch& batch, std::vector<Hit>& hits) {

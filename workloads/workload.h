@@ -86,4 +86,17 @@ struct Rng {
   float uniform() { return float(next() >> 40) * 0x1p-24f; }  // [0, 1)
 };
 
+// Sampling helpers shared by the path workloads (bounce, shadow) and the path tracer of
+// harness/pathtrace (thesis ch. 6): one definition each, in workload.cpp.
+// Orthonormal basis (t, b) around the unit vector n (Duff et al. 2017).
+void basis(Vec3 n, Vec3& t, Vec3& b);
+// Cosine-weighted direction in the hemisphere around n (Malley's method): pdf cos(theta) / pi.
+Vec3 cosine_hemisphere(Vec3 n, Rng& rng);
+// A point on a surface and its geometric normal, from a hit's barycentrics.
+struct SurfacePoint {
+  Vec3 p, n;
+  float eps;  // offset that clears the surface: relative to the triangle's size and position
+};
+SurfacePoint surface_point(const Scene& s, uint32_t tri, float u, float v);
+
 }  // namespace tb
