@@ -5,6 +5,7 @@
 // and of Embree's three build qualities, on the --scene.
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <ctime>
@@ -81,8 +82,8 @@ Scene triangle_prefix(const Scene& s, size_t n, const std::string& name) {
 }
 
 // Table 1's group: four objects of total/4 triangles each, pieces of the Stanford models found
-// beside the --scene file (or in ../shared/scenes): the first four of lucy, dragon, buddha, bunny,
-// lucy, dragon, ... that have that many triangles (bunny's 69k are too few for the 388k row,
+// beside the --scene file (or in ../shared/scenes, or beside TRAVBENCH_REFERENCE_DIR): the first
+// four of lucy, dragon, buddha, bunny, lucy, dragon, ... that have that many triangles (bunny's 69k are too few for the 388k row,
 // where a second Lucy takes its place). Without the models, spheres:total/4 meshes, labelled.
 // Each object is scaled to unit size, turned by 45 degrees more than the last and set in a row.
 struct Group {
@@ -94,6 +95,9 @@ Group make_group(size_t total, const std::string& scene_arg) {
   std::vector<fs::path> dirs;
   if (fs::is_regular_file(scene_arg)) dirs.push_back(fs::path(scene_arg).parent_path());
   dirs.push_back("../shared/scenes");
+  // The scenes lie beside the thesis tables (../shared/{reference,scenes}): a checkout elsewhere
+  // that points TRAVBENCH_REFERENCE_DIR at them finds the models too.
+  if (const char* ref = std::getenv("TRAVBENCH_REFERENCE_DIR")) dirs.push_back(fs::path(ref).parent_path() / "scenes");
   const size_t each = total / 4;
   std::vector<Scene> meshes;
   std::string names;
