@@ -67,7 +67,9 @@ for scene in "${scenes[@]}"; do
   # Tables 2-4 at the thesis' own parameters: without --width/--height the divergence table runs
   # 1280x800 with the thesis camera (0.034 deg * D between adjacent rays, §3.4); --quick keeps its
   # small image (a smoke test, not a thesis table: its CSV says so in deg_per_ray and the sidecar).
-  if [ $quick -eq 1 ]; then div=("${small[@]}"); else div=(--reps 3); fi
+  # The four schemes of the thesis' comparison (ranged packets, partition, the single-ray control,
+  # Embree's packets): every scheme at 1280x800 would take about an hour per scene on 2 cores.
+  if [ $quick -eq 1 ]; then div=("${small[@]}"); else div=(--schemes bvh_ranged,bvh_partition,mbvh4_single,embree_packet8 --reps 3); fi
   has divergence && steps+=("$TB table divergence --scene $scene ${div[*]} --csv $out/divergence.csv")
   has bounce && steps+=("$TB table bounce --scene $scene ${big[*]} --csv $out/bounce.csv")
   has raygrid && steps+=("$TB table raygrid --scene $scene ${big[*]} --csv $out/raygrid.csv")
