@@ -10,7 +10,7 @@
 #   SIZE=128 (image side) in the environment.
 #
 # loads_per_ray / stores_per_ray: callgrind's data reads / writes (Dr, Dw; --cache-sim=yes) inside
-# the timed trace of each cell (collection toggled on in tb::measure: warm-up + 1 rep, 1 thread), over the rays
+# the timed trace (collection toggled on in tb::measure: warm-up + 1 rep, 1 thread), over the rays
 # traced; d1/ll_misses_per_ray: its simulated D1 and last-level data misses (its own cache model:
 # 32 KB D1 and the host's LL by default); branch_mispredicts_per_ray: --branch-sim's conditional +
 # indirect mispredictions (a simple predictor model, not the host's). sim_read_lines_per_ray: `travbench run --cache` on the same cell (native build), all
@@ -29,49 +29,45 @@ cmake --build build-valgrind -j "$(nproc)" --target travbench >build-valgrind/bu
 cmake --build build -j "$(nproc)" --target travbench >/dev/null
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-# One process for the three cells (the scene is loaded and built once): mbvh_rs and raygrid in the
-# thesis' 4-wide layout as `table cache` runs them (--param keys apply to the schemes declaring them);
-# callgrind dumps once per measured cell (--dump-after), in the order of the CSV's rows.
-SCHEMES=mbvh_rs,raygrid,mbvh4_single
-PARAMS=(--param width=4 --param queue=256)
-echo "loads_per_ray: $SCHEMES bounce:2 on $name (${SIZE}x${SIZE}) under callgrind" >&2
-valgrind --tool=callgrind --cache-sim=yes --branch-sim=yes --collect-atstart=no --toggle-collect='tb::measure(*' \
-  --dump-after='tb::measure(*' --callgrind-out-file="$work/cg" -q build-valgrind/travbench run --scene "$SCENE" \
-  --schemes "$SCHEMES" "${PARAMS[@]}" --workloads bounce:2 --width "$SIZE" --height "$SIZE" --reps 1 --threads 1 \
-  --csv "$work/run.csv" >/dev/null 2>"$work/run.log" || { cat "$work/run.log" >&2; exit 1; }
-build/travbench run --scene "$SCENE" --schemes "$SCHEMES" "${PARAMS[@]}" --workloads bounce:2 --width "$SIZE" \
-  --height "$SIZE" --reps 1 --threads 1 --cache --csv "$work/sim.csv" >/dev/null 2>>"$work/run.log" ||
-  { cat "$work/run.log" >&2; exit 1; }
+# scheme|parameters: mbvh_rs and raygrid in the thesis' 4-wide layout, as `table cache` runs them.
+# One valgrind process per cell (callgrind's totals are per process), the three side by side.
+cells=("mbvh_rs|--param width=4" "raygrid|--param width=4 --param queue=256" "mbvh4_single|")
+measure() {
+  local s=${1%%|*} p=${1#*|}
+  echo "loads_per_ray: $s bounce:2 on $name (${SIZE}x${SIZE}) under callgrind" >&2
+  # shellcheck disable=SC2086
+  valgrind --tool=callgrind --cache-sim=yes --branch-sim=yes --collect-atstart=no --toggle-collect='tb::measure(*' \
+    --callgrind-out-file="$work/$s.cg" -q build-valgrind/travbench run --scene "$SCENE" --schemes "$s" $p \
+    --workloads bounce:2 --width "$SIZE" --height "$SIZE" --reps 1 --threads 1 --csv "$work/$s.csv" >/dev/null 2>"$work/$s.log" ||
+    { cat "$work/$s.log" >&2; exit 1; }
+  # shellcheck disable=SC2086
+  build/travbench run --scene "$SCENE" --schemes "$s" $p --workloads bounce:2 --width "$SIZE" --height "$SIZE" \
+    --reps 1 --threads 1 --cache --csv "$work/$s.sim.csv" >/dev/null 2>>"$work/$s.log" || { cat "$work/$s.log" >&2; exit 1; }
+}
+pids=()
+for cell in "${cells[@]}"; do measure "$cell" & pids+=($!); done
+for p in "${pids[@]}"; do wait "$p" || { echo "loads_per_ray: a cell failed" >&2; exit 1; }; done
 mkdir -p "$(dirname "$OUT")"
-/usr/bin/python3 - "$work" "$OUT" "$SIZE" <<'PY'
+/usr/bin/python3 - "$work" "$OUT" "$SIZE" "${cells[@]}" <<'PY'
 import csv, re, sys
-import glob
-work, out, size = sys.argv[1], sys.argv[2], sys.argv[3]
-parts = []
-for path in glob.glob(f"{work}/cg*"):
-    text = open(path).read()
-    m = re.search(r"^totals: (.*)$", text, re.M) or re.search(r"^summary: (.*)$", text, re.M)
-    part = re.search(r"^part: (\d+)$", text, re.M)
-    events = re.search(r"^events: (.*)$", text, re.M).group(1).split()
-    ev = dict(zip(events, [int(x) for x in m.group(1).split()]))
-    if ev.get("Ir", 0) > 0:
-        parts.append((int(part.group(1)) if part else 0, ev))
-parts.sort(key=lambda p: p[0])
-runs = list(csv.DictReader(l for l in open(f"{work}/run.csv") if not l.startswith("#")))
-sims = {r["scheme"]: r for r in csv.DictReader(l for l in open(f"{work}/sim.csv") if not l.startswith("#"))}
-if len(parts) != len(runs):
-    sys.exit(f"loads_per_ray: {len(parts)} callgrind dumps with events for {len(runs)} cells")
+work, out, size, cells = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4:]
 rows = []
-for (_, ev), c in zip(parts, runs):
-    s, sim = c["scheme"], sims[c["scheme"]]
+for cell in cells:
+    s = cell.split("|")[0]
+    text = open(f"{work}/{s}.cg").read()
+    events = re.search(r"^events: (.*)$", text, re.M).group(1).split()
+    m = re.search(r"^totals: (.*)$", text, re.M) or re.search(r"^summary: (.*)$", text, re.M)
+    ev = dict(zip(events, [int(x) for x in m.group(1).split()]))
+    c = next(csv.DictReader(l for l in open(f"{work}/{s}.csv") if not l.startswith("#")))
+    sim = next(csv.DictReader(l for l in open(f"{work}/{s}.sim.csv") if not l.startswith("#")))
     rays = int(c["rays"]) * 2  # warm-up + 1 timed rep
     sim_reads = sum(float(sim[k]) for k in ("l1_read_hit_m", "l2_read_hit_m", "l3_read_hit_m", "mem_read_m")) * 1e6
-    rows.append({"scene": c["scene"], "workload": c["workload"], "scheme": s, "params": c.get("params", ""),
+    rows.append({"scene": c["scene"], "workload": c["workload"], "scheme": s, "params": cell.split("|")[1].replace("--param ", ""),
                  "image": f"{size}x{size}", "rays": c["rays"], "instructions_per_ray": f"{ev['Ir'] / rays:.1f}",
                  "loads_per_ray": f"{ev['Dr'] / rays:.1f}", "stores_per_ray": f"{ev['Dw'] / rays:.1f}",
                  "d1_misses_per_ray": f"{(ev['D1mr'] + ev['D1mw']) / rays:.1f}",
                  "ll_misses_per_ray": f"{(ev['DLmr'] + ev['DLmw']) / rays:.1f}",
-                 "branch_mispredicts_per_ray": f"{(ev['Bcm'] + ev['Bim']) / rays:.1f}",
+                 "branch_mispredicts_per_ray": f"{(ev.get('Bcm', 0) + ev.get('Bim', 0)) / rays:.1f}",
                  "sim_read_lines_per_ray": f"{sim_reads / int(sim['rays']):.1f}"})
 with open(out, "w", newline="") as f:
     w = csv.DictWriter(f, fieldnames=list(rows[0]))
