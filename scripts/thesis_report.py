@@ -144,9 +144,11 @@ EXPLAIN = {
         "2 MB-L3 model shows (Table 11: RayGrid's simulated read cost below MBVH/RS's on Conference) has no "
         "counterpart in time here and the extra work decides."),
     "t9.rg_beats_single@counted": (
-        "measured: as for t9.rg_beats_rs on this scene — RayGrid's gain is memory traffic, and callgrind counts "
-        "(figures above, scripts/loads_per_ray.sh) give it more instructions and stores per ray than single-ray "
-        "traversal and no fewer last-level misses: its locality saves nothing here and the extra work decides."),
+        "unexplained in part. Measured: RayGrid's gain is memory traffic, and callgrind counts (figures above, "
+        "scripts/loads_per_ray.sh) give it more instructions and stores per ray than single-ray traversal and no "
+        "fewer last-level misses, so its locality has nothing to save here and its extra work is what it pays; "
+        "how much of that work the core hides is not measured (on `room` RayGrid wins at 1.71x single-ray's "
+        "instructions, room/loads_per_ray.csv)."),
     "t9.rg_beats_single": (
         "unexplained (stadium: a built-in scene; docs/PERFORMANCE.md measures RayGrid's gain as memory "
         "locality, which a small scene does not need)."),
