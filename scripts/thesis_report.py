@@ -115,9 +115,13 @@ EXPLAIN = {
         "own scenes need not hold. Measured around it: bvh_partition 6,892 vs mbvh4_single 1,596 instructions "
         "per ray on Sponza bounce 3 (docs/PERFORMANCE.md)."),
     "t7.depth3_mbvhrs": (
-        "unexplained. Measured around it: mbvh_rs executes 2,497 instructions per ray on Sponza bounce 3 against "
-        "mbvh4_single's 1,596 (docs/PERFORMANCE.md), 1.56x more, and is still faster: its gain is memory "
-        "locality, which the cache table models; why its gain is larger than in the thesis is not measured."),
+        "unexplained. Measured around it, and none of it predicts MBVH/RS being the faster: mbvh_rs executes "
+        "2,497 instructions per ray on Sponza bounce 3 against mbvh4_single's 1,596 (docs/PERFORMANCE.md), "
+        "1.56x more; on Conference bounce 2 callgrind counts 1.43x the instructions, 1.4x the D1 misses and "
+        "0.61x the mispredicted branches of mbvh4_single (conference/loads_per_ray.csv; room and stadium "
+        "alike), and the cache table's simulated read cost is 2.7x single-ray's (conference/cache.csv, 4-wide). "
+        "What remains is how many of its independent per-ray loads the core overlaps (memory-level "
+        "parallelism), which needs hardware counters the VM does not expose."),
     "t7.ranged_below_partition": (
         "measured: implementation, not the algorithm. Ranged does scan far more ray-node pairs than partition "
         "after a bounce (the counts printed above: the thesis' reason for its slowdown holds here too), but in "
