@@ -619,6 +619,7 @@ def cache(R):
         rows_c = [[lab, f(num(by[lab]["read_lines_per_ray"]), 0), f(num(by[lab]["read_words_per_ray"]), 0),
                    f(t_reads[lab], 0), f(t_reads[lab] / num(by[lab]["read_lines_per_ray"]), 1)]
                   for lab, _ in cols if lab in by and by[lab].get("read_words_per_ray")]
+        R.out()
         R.out("Reads per ray (all demand reads: L1 hits + misses), ours counted per 64-byte line and, tracing the same "
               "cell again through the hierarchy with 4-byte lines, per 4-byte word; the thesis' from its Table 11 over "
               "512 × 512 rays:\n")
