@@ -678,6 +678,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(RESULTS, "THESIS.md"))
     a = ap.parse_args()
+    if not os.path.isdir(REFERENCE):
+        sys.exit(f"thesis_report: thesis tables not found in {REFERENCE} (set TRAVBENCH_REFERENCE_DIR)")
     R = Report()
     for part in (table1, divergence, bounce, raygrid, cache, simt):
         part(R)
