@@ -3,8 +3,19 @@
 // millions, the estimated cost and each level's share; then the same columns for every other
 // scheme. The thesis' costs add up read hits x latency only (see cachesim/hierarchy.h), so the
 // comparison column is read_cost_mcycles.
+//
+// Layout: RayGrid and MBVH/RS run the thesis' 4-wide SSE nodes (thesis_layout, harness/tables.h;
+// the `layout` column) unless --param width is given. Counting unit: one access is one 64-byte
+// line touched by a load or store (an access of n bytes counts every line it overlaps,
+// cachesim/hierarchy.h), so a 128-byte MBVH4 node read is 2 accesses. The thesis does not state
+// its unit; to measure what a finer unit gives, the thesis' cells are traced a second time through
+// the same hierarchy with 4-byte lines, where every access counts the 4-byte words it reads:
+// `read_lines_per_ray` (all demand reads, L1 hits + misses, 64-byte lines) beside
+// `read_words_per_ray` (the same trace counted in words), against the thesis' reads per ray
+// (its L1 + L2 + L3 + memory read counts over the 512 x 512 rays).
 #include <cstdio>
 
+#include "harness/cache_columns.h"
 #include "harness/tables.h"
 #include "harness/thesis_reference.h"
 #include "structures/builtin_scenes.h"
@@ -24,6 +35,7 @@ int cache_table(const TableOptions& opt) {
   struct Cell {
     std::string scheme, label, thesis_col;
     SchemeConfig cfg;
+    std::string layout;
   };
   std::vector<Cell> cells;
   const bool has_raygrid = [] {
@@ -36,18 +48,38 @@ int cache_table(const TableOptions& opt) {
     for (int m : {64, 128, 256, 512, 1024}) {
       SchemeConfig c = config_for("raygrid", run.scheme_config);
       c.params["queue"] = std::to_string(m);
-      cells.push_back({"raygrid", "raygrid M=" + std::to_string(m), "batch" + std::to_string(m), c});
+      const std::string layout = thesis_layout("raygrid", c);
+      cells.push_back({"raygrid", "raygrid M=" + std::to_string(m), "batch" + std::to_string(m), c, layout});
     }
   for (const auto& name : names)
-    if (name != "raygrid")
-      cells.push_back({name, name, name == "mbvh_rs" ? "mbvh_rs" : "", config_for(name, run.scheme_config)});
+    if (name != "raygrid") {
+      SchemeConfig c = config_for(name, run.scheme_config);
+      const std::string layout = thesis_layout(name, c);
+      cells.push_back({name, name, name == "mbvh_rs" ? "mbvh_rs" : "", c, layout});
+    }
+  // Every demand read of a trace through `config`, per ray: L1 read hits + misses (a miss goes on
+  // to L2, so the misses are L2 read hits + L2 misses, down to memory reads).
+  auto reads_per_ray = [](const Record& r, double rays) {
+    double m = 0;
+    for (const char* k : {"l1_read_hit_m", "l2_read_hit_m", "l3_read_hit_m", "mem_read_m"})
+      if (auto v = r.get(k)) m += std::stod(*v);
+    return m * 1e6 / std::max(1.0, rays);
+  };
   const bool conference = bench.scene().name == "conference";
   std::vector<Record> records;
   for (const Cell& c : cells) {
     auto t = make_scheme(c.scheme, c.cfg);
     t->prepare(bench.scene(), bench.cache());
     Record r = measure_cell(bench, spec, *t, run);
-    r.set("label", c.label);
+    r.set("label", c.label).set("layout", c.layout);
+    const double rays = double(bench.rays(spec).size());
+    r.set("read_lines_per_ray", reads_per_ray(r, rays));
+    if (!c.thesis_col.empty()) {
+      Record words;
+      std::vector<Hit> hits(bench.rays(spec).size());
+      add_cache_columns(words, *t, bench.rays(spec), hits, "l1=32K:8:4,l2=256K:8:4,l3=2M:16:4", run.cache_policy);
+      r.set("read_words_per_ray", reads_per_ray(words, rays));
+    }
     if (conference && !c.thesis_col.empty()) {  // the thesis measured the Conference Room
       for (const auto& [ours, theirs] : std::vector<std::pair<std::string, std::string>>{
                {"l1_read_hit_m", "l1_read_hit"}, {"l2_read_hit_m", "l2_read_hit"}, {"l3_read_hit_m", "l3_read_hit"},
@@ -59,9 +91,12 @@ int cache_table(const TableOptions& opt) {
                  r.get("l1_read_hit_m")->c_str(), r.get("mem_read_m")->c_str(), r.get("read_cost_mcycles")->c_str());
     records.push_back(std::move(r));
   }
-  write_csv(opt.csv, records, {{"command", "table cache"}, {"workload", "bounce:2"}, {"image", "512x512"}});
+  write_csv(opt.csv, records,
+            {{"command", "table cache"}, {"workload", "bounce:2"}, {"image", "512x512"},
+             {"access_unit", "one 64-byte line touched per access; read_words_per_ray: the same trace in 4-byte words"}});
   print_table(records, {"label", "l1_read_hit_m", "l2_read_hit_m", "l3_read_hit_m", "mem_read_m", "l1_write_hit_m",
-                        "read_cost_mcycles", "l1_pct", "l2_pct", "l3_pct", "mem_pct", "thesis_read_cost_mcycles"},
+                        "read_cost_mcycles", "l1_pct", "l2_pct", "l3_pct", "mem_pct", "thesis_read_cost_mcycles", "layout",
+                        "read_lines_per_ray", "read_words_per_ray"},
               stdout);
   return 0;
 }

@@ -10,7 +10,9 @@
 # Tables 12-13, docs/SIMT.md, ~2 minutes per real scene; image: one heat map per scheme family,
 # heat_<scheme>_<metric>.png, `travbench image`). --scaling adds the scaling
 # table (spheres:100k..10M, bounce:2; ~4 minutes, 6 GB of memory) under results/spheres/.
-# Ends with the performance-goal ratios of each scene (scripts/goals.py).
+# Ends with the performance-goal ratios of each scene (scripts/goals.py) and results/THESIS.md
+# (scripts/thesis_report.py). Every thesis table for every scene: scripts/run.sh ../shared/scenes
+# (Tables 2-4 at 1280x800, Table 11 at 512x512 as the thesis ran them; Table 1 in each build.csv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=0
@@ -62,7 +64,13 @@ for scene in "${scenes[@]}"; do
   if grep -qw run <<<"${want//,/ }"; then
     steps+=("$TB run --scene $scene --schemes all --workloads primary,divergence:8,rnd,rnd2,bounce:1,bounce:2,bounce:3,shadow --stats ${big[*]} --csv $out/run.csv")
   fi
-  has divergence && steps+=("$TB table divergence --scene $scene ${small[*]} --csv $out/divergence.csv")
+  # Tables 2-4 at the thesis' own parameters: without --width/--height the divergence table runs
+  # 1280x800 with the thesis camera (0.034 deg * D between adjacent rays, §3.4); --quick keeps its
+  # small image (a smoke test, not a thesis table: its CSV says so in deg_per_ray and the sidecar).
+  # The four schemes of the thesis' comparison (ranged packets, partition, the single-ray control,
+  # Embree's packets): every scheme at 1280x800 would take about an hour per scene on 2 cores.
+  if [ $quick -eq 1 ]; then div=("${small[@]}"); else div=(--schemes bvh_ranged,bvh_partition,mbvh4_single,embree_packet8 --reps 3); fi
+  has divergence && steps+=("$TB table divergence --scene $scene ${div[*]} --csv $out/divergence.csv")
   has bounce && steps+=("$TB table bounce --scene $scene ${big[*]} --csv $out/bounce.csv")
   has raygrid && steps+=("$TB table raygrid --scene $scene ${big[*]} --csv $out/raygrid.csv")
   has cache && steps+=("$TB table cache --scene $scene --reps 1 --csv $out/cache.csv")
@@ -120,4 +128,6 @@ for f in "${folders[@]}"; do
   for c in "$f/run.csv" "$f/build.csv"; do if [ -f "$c" ]; then csvs+=("$c"); fi; done
   if [ ${#csvs[@]} -gt 0 ]; then /usr/bin/python3 scripts/goals.py "${csvs[@]}"; fi
 done
+# results/THESIS.md: the thesis' tables beside ours and its claims as checks, from the CSVs above.
+/usr/bin/python3 scripts/thesis_report.py >&2
 echo "done in $(( $(date +%s) - start )) s: ${folders[*]}" >&2

@@ -398,31 +398,7 @@ BVH BVH::build(std::span<PrimRef> refs, const BVHBuildParams& p) {
 }
 
 void BVH::refit(const Scene& scene, int threads) {
-  // Post-order over the tree; the top levels fork so `threads` subtrees refit at once.
-  int fork_levels = 0;
-  while ((1 << fork_levels) < threads) ++fork_levels;
-  auto rec = [&](auto&& self, uint32_t i, int depth) -> void {
-    BVHNode& nd = nodes[i];
-    AABB b;
-    if (nd.is_leaf()) {
-      for (uint32_t k = nd.left_first; k < nd.left_first + nd.count; ++k) b.grow(scene.triangle_bounds(prim_index[k]));
-    } else {
-      if (depth < fork_levels) {
-        std::thread left([&] { self(self, nd.left_first, depth + 1); });
-        self(self, nd.left_first + 1, depth + 1);
-        left.join();
-      } else {
-        self(self, nd.left_first, depth + 1);
-        self(self, nd.left_first + 1, depth + 1);
-      }
-      const BVHNode &l = nodes[nd.left_first], &r = nodes[nd.left_first + 1];
-      b.grow(AABB{l.lo, l.hi});
-      b.grow(AABB{r.lo, r.hi});
-    }
-    nd.lo = b.lo;
-    nd.hi = b.hi;
-  };
-  if (!nodes.empty()) rec(rec, 0, 0);
+  refit_boxes([&](uint32_t id) { return scene.triangle_bounds(id); }, threads);
 }
 
 void BVH::finish_stats(const BVHBuildParams& params, std::chrono::steady_clock::time_point start) {

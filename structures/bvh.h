@@ -14,6 +14,7 @@
 #include <cstring>
 #include <span>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "structures/aligned.h"
@@ -88,10 +89,43 @@ struct BVH {
   static BVH build(std::span<PrimRef> refs, const BVHBuildParams& params = {});
   // Recomputes every box bottom-up for moved vertices, keeping the topology (thesis Table 1).
   void refit(const Scene& scene, int threads = 1);
+  // The same over any primitives: box_of(id) is primitive id's current box (the top level of a
+  // two-level BVH refits over its instances' world boxes, structures/two_level.h). Post-order
+  // over the tree; the top levels fork so `threads` subtrees refit at once.
+  template <class BoxOf>
+  void refit_boxes(const BoxOf& box_of, int threads = 1);
   double compute_sah_cost(const BVHBuildParams& params) const;
   // Fills `stats` from the finished tree, all but max_depth (which only the builder knows), the
   // build time counted from `start`: the last step of both builders (binned SAH, spatial splits).
   void finish_stats(const BVHBuildParams& params, std::chrono::steady_clock::time_point start);
 };
+
+template <class BoxOf>
+void BVH::refit_boxes(const BoxOf& box_of, int threads) {
+  int fork_levels = 0;
+  while ((1 << fork_levels) < threads) ++fork_levels;
+  auto rec = [&](auto&& self, uint32_t i, int depth) -> void {
+    BVHNode& nd = nodes[i];
+    AABB b;
+    if (nd.is_leaf()) {
+      for (uint32_t k = nd.left_first; k < nd.left_first + nd.count; ++k) b.grow(box_of(prim_index[k]));
+    } else {
+      if (depth < fork_levels) {
+        std::thread left([&] { self(self, nd.left_first, depth + 1); });
+        self(self, nd.left_first + 1, depth + 1);
+        left.join();
+      } else {
+        self(self, nd.left_first, depth + 1);
+        self(self, nd.left_first + 1, depth + 1);
+      }
+      const BVHNode &l = nodes[nd.left_first], &r = nodes[nd.left_first + 1];
+      b.grow(AABB{l.lo, l.hi});
+      b.grow(AABB{r.lo, r.hi});
+    }
+    nd.lo = b.lo;
+    nd.hi = b.hi;
+  };
+  if (!nodes.empty()) rec(rec, 0, 0);
+}
 
 }  // namespace tb
