@@ -20,4 +20,48 @@ inline BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBui
 template <class Derived>
 using BVHScheme = TreeScheme<Derived, BVH, BVHBuildParams, bvh_params>;
 
+// One ray's closest-hit loop over a binary BVH (thesis Alg. 2.4): near child first, far children
+// stacked with their entry distances, popped entries at or beyond the closest hit skipped.
+// `leaf(n)` tests leaf n's primitives against `hit`; `stack` holds max_depth + 2 entries.
+// bvh_single and both levels of the two-level BVH (traversal/two_level.cpp) run it.
+struct BVHStackEntry {
+  uint32_t node;
+  float dist;
+};
+template <class P, class Leaf>
+[[gnu::always_inline]] inline void bvh_closest_hit(const BVHNode* nodes, const RayCtx& rc, float tmin, Hit& hit,
+                                                   BVHStackEntry* stack, P& probe, Leaf&& leaf) {
+  if (box_entry(rc, nodes[0].lo, nodes[0].hi, tmin, hit.t) == INFINITY) return;
+  uint32_t sp = 0, node = 0;
+  while (node != UINT32_MAX) {
+    const BVHNode& n = nodes[node];
+    if (n.is_leaf()) {
+      probe.leaf(&n, sizeof(BVHNode));
+      leaf(n);
+    } else {
+      probe.node(&n, sizeof(BVHNode));
+      const BVHNode* c = &nodes[n.left_first];
+      float d0 = box_entry(rc, c[0].lo, c[0].hi, tmin, hit.t);
+      float d1 = box_entry(rc, c[1].lo, c[1].hi, tmin, hit.t);
+      uint32_t near = n.left_first, far = n.left_first + 1;
+      if (d1 < d0) { std::swap(d0, d1); std::swap(near, far); }
+      if (d0 != INFINITY) {
+        if (d1 != INFINITY) {
+          stack[sp++] = {far, d1};
+          probe.write(&stack[sp - 1], sizeof(BVHStackEntry));
+        }
+        node = near;
+        continue;
+      }
+    }
+    // Pop the nearest pending node that may still hold a closer hit.
+    node = UINT32_MAX;
+    while (sp > 0) {
+      const BVHStackEntry e = stack[--sp];
+      probe.read(&stack[sp], sizeof(BVHStackEntry));
+      if (e.dist < hit.t) { node = e.node; break; }
+    }
+  }
+}
+
 }  // namespace tb

@@ -8,7 +8,6 @@
 // test). Global prim ids are TwoLevelBVH::prim_offset(instance) + the object's triangle index,
 // the order of TwoLevelBVH::flatten().
 #pragma once
-#include <cstdint>
 #include <span>
 
 #include "structures/two_level.h"
@@ -16,16 +15,8 @@
 
 namespace tb {
 
-struct TwoLevelStats {
-  uint64_t top_nodes = 0;        // top-level nodes visited (interior and leaf)
-  uint64_t instance_visits = 0;  // rays transformed into an instance
-  uint64_t object_nodes = 0;     // object-level nodes visited
-  uint64_t tri_tests = 0;
-};
-
-Hit trace_two_level(const TwoLevelBVH& tl, const Ray& ray, TwoLevelStats* stats = nullptr);
+Hit trace_two_level(const TwoLevelBVH& tl, const Ray& ray);
 // Every ray of the batch, on the calling thread.
-void trace_two_level(const TwoLevelBVH& tl, const RayBatch& batch, std::span<Hit> hits,
-                     TwoLevelStats* stats = nullptr);
+void trace_two_level(const TwoLevelBVH& tl, const RayBatch& batch, std::span<Hit> hits);
 
 }  // namespace tb
