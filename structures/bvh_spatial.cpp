@@ -314,18 +314,6 @@ class SpatialBuilder {
         bins[b0].box.grow(r.box);
         continue;
       }
-      if (b1 - b0 + 1 > sp_.chop_max) {
-        // Many bins: the reference's box cut to each bin's slab, a superset of the exact part
-        // (the same for the axis-aligned floors and walls that span most bins) at no clipping
-        // cost; the split itself, if chosen, clips exactly (do_spatial).
-        for (int b = b0; b <= b1; ++b) {
-          AABB part = r.box;
-          part.lo[A] = std::max(part.lo[A], ab.pl[b]);
-          part.hi[A] = std::min(part.hi[A], ab.pl[b + 1]);
-          bins[b].box.grow(part);
-        }
-        continue;
-      }
       // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
       // same way): one float sweep of the triangle's edges through the planes (clip.h,
       // chop_triangle_bounds, padded outward so each part is conservative), each part cut to

@@ -49,11 +49,6 @@ struct SpatialSplitParams {
   // Spatial bins per axis in such kept nodes (below min_refs): chopping their large reference
   // over every bin is most of their cost; 8 gives the same SAH within 0.1% as 16.
   int small_spatial_bins = 8;
-  // A reference spanning more spatial bins than this is binned as its box cut to each bin's slab
-  // instead of being chopped at every plane. A cut box overestimates the part of a diagonal
-  // triangle, so no spatial split is found for it; since the chop is one float sweep
-  // (chop_triangle_bounds) the default never cuts.
-  int chop_max = 1000;
 };
 
 // One reference: a (possibly clipped) box around part of triangle `prim`.

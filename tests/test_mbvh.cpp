@@ -281,7 +281,7 @@ void block_matches_scalar() {
       // A block's real lanes: all, or (as the last block of a leaf) fewer; the others must never hit.
       const uint32_t lanes = iter % 2 ? uint32_t(W) : uint32_t(W) - uint32_t(iter / 2) % uint32_t(W);
       for (uint32_t l = 0; l < lanes; ++l) intersect_tri<TriKernel::watertight>(rc, ts, l, ray.tmin, a);
-      block_intersect<W>(TriRay<W>(rc, ray.tmin), blk, b, lane_bits(lanes));
+      block_intersect<W>(TriRay<W>(rc, ray.tmin), blk, b, lanes);
       ASSERT_EQ(a.prim, b.prim) << "iter " << iter << " ray " << r;
       if (a.hit()) {
         ++hits;

@@ -77,18 +77,25 @@ inline __m256i sort8(__m256i k) {
 // for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
 // reciprocal, pad, multiply — is the same as box_entry's, so the same bound holds), and the rows
 // of the near and far planes per axis (sign-selected slabs, Williams et al. 2005).
+// The reciprocals are stored NEGATED: box_test computes (origin - plane) * -inv, which is
+// (plane - origin) * inv exactly (IEEE negation is exact and commutes with rounding; only the sign
+// of a zero product can differ, and a zero never decides the slab test: the running bounds are
+// the max/min's second operands on ties). The point is the subtraction's operand order: vsubps
+// takes its memory operand second, so origin - plane folds the node row's load into the
+// subtraction — one instruction per plane, six per node test fewer (callgrind, sponza primary
+// 128x128, mbvh4_single: see docs/PERFORMANCE.md, session 7).
 template <int N>
 struct NodeRay {
   using f = typename simd::V<N>::f;
-  f ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin;
+  f ox, oy, oz, nix, niy, niz, nfx, nfy, nfz, tmin;  // nix = -1/dir.x, nfx = -(1/dir.x * kFarPad)
   uint32_t near[3], far[3];  // float offsets into MBVHNode::box
   NodeRay(const RayCtx& rc, float t0) { init(rc.org, rc.inv, t0); }
   NodeRay(Vec3 org, Vec3 inv, float t0) { init(org, inv, t0); }
   void init(Vec3 org, Vec3 inv, float t0) {
     using S = simd::V<N>;
     ox = S::set1(org.x), oy = S::set1(org.y), oz = S::set1(org.z);
-    ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
-    fx = S::set1(inv.x * kFarPad), fy = S::set1(inv.y * kFarPad), fz = S::set1(inv.z * kFarPad);
+    nix = S::set1(-inv.x), niy = S::set1(-inv.y), niz = S::set1(-inv.z);
+    nfx = S::set1(-(inv.x * kFarPad)), nfy = S::set1(-(inv.y * kFarPad)), nfz = S::set1(-(inv.z * kFarPad));
     tmin = S::set1(t0);
     for (int a = 0; a < 3; ++a) {
       const bool neg = std::signbit(inv[a]);
@@ -100,17 +107,17 @@ struct NodeRay {
 
 // Entry distances `tn` of the N children and the lanes the ray enters before `tfar` (all-ones
 // lanes; movemask gives the bits): the kernel library's slab test on N lanes, one lane per child,
-// with the far reciprocal padded per ray (kPadRcp).
+// with the far reciprocal padded per ray (kPadRcp), on the negated operands NodeRay explains.
 template <int N>
 [[gnu::always_inline]] inline typename simd::V<N>::f box_test(const MBVHNode<N>& nd, const NodeRay<N>& r, float tfar,
                                                               typename simd::V<N>::f& tn_out) {
   using S = simd::V<N>;
   const float* b = &nd.box[0][0];
-  const typename S::f xn[3] = {S::sub(S::load(b + r.near[0]), r.ox), S::sub(S::load(b + r.near[1]), r.oy),
-                               S::sub(S::load(b + r.near[2]), r.oz)};
-  const typename S::f xf[3] = {S::sub(S::load(b + r.far[0]), r.ox), S::sub(S::load(b + r.far[1]), r.oy),
-                               S::sub(S::load(b + r.far[2]), r.oz)};
-  const typename S::f rn[3] = {r.ix, r.iy, r.iz}, rf[3] = {r.fx, r.fy, r.fz};
+  const typename S::f xn[3] = {S::sub(r.ox, S::load(b + r.near[0])), S::sub(r.oy, S::load(b + r.near[1])),
+                               S::sub(r.oz, S::load(b + r.near[2]))};
+  const typename S::f xf[3] = {S::sub(r.ox, S::load(b + r.far[0])), S::sub(r.oy, S::load(b + r.far[1])),
+                               S::sub(r.oz, S::load(b + r.far[2]))};
+  const typename S::f rn[3] = {r.nix, r.niy, r.niz}, rf[3] = {r.nfx, r.nfy, r.nfz};
   return slab<N, true>(xn, xf, rn, rf, r.tmin, S::set1(tfar), tn_out);
 }
 
@@ -147,11 +154,14 @@ constexpr uint32_t lane_bits(uint32_t n) { return (1u << n) - 1; }
 // The watertight test of the kernel library on W triangles at once (one ray, W lanes): the same
 // float operations in the same order per lane as intersect_watertight, so its watertightness
 // carries over. On a hit with tmin <= t < hit.t records the closest (the first lane on ties, as a
-// scalar loop would) and returns true. `lanes` are the block's real triangles: the last block of
-// a leaf pads with copies of its last triangle, and a ray whose line crosses that triangle (one
-// leaving it, say) would otherwise pay the double distance once per copy (issue 17).
+// scalar loop would) and returns true. `tris` counts the leaf's triangles from this block on (>= W:
+// every lane is real): the last block of a leaf pads with copies of its last triangle, and a ray
+// whose line crosses that triangle (one leaving it, say) would otherwise pay the double distance
+// once per copy (issue 17). The padding lanes are masked only once some lane passes the edge
+// test: most blocks are missed by every lane, and building the mask before the test cost ~3
+// instructions per block (callgrind, mbvh4_single sponza primary: 1.0 M of 59.6 M).
 template <int W>
-[[gnu::noinline]] inline bool block_intersect(const TriRay<W>& r, const TriBlock<W>& b, Hit& hit, uint32_t lanes) {
+[[gnu::noinline]] inline bool block_intersect(const TriRay<W>& r, const TriBlock<W>& b, Hit& hit, uint32_t tris) {
   using S = simd::V<W>;
   using f = typename S::f;
   const f Az = S::sub(S::load(b.v[0][r.kz]), r.oz);
@@ -164,8 +174,9 @@ template <int W>
   const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), r.ox), r.sx, Cz);
   const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), r.oy), r.sy, Cz);
   f U, Vv, Ww, det;
-  int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det)) & int(lanes);
+  int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return false;
+  if (tris < uint32_t(W)) m &= int(lane_bits(tris));
   // The candidates (usually none or one per block): exact_plane_distance's plane equation in
   // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
   alignas(32) float us[W], vs[W], ws[W], dets[W];
@@ -206,7 +217,7 @@ inline void leaf_test(const TriBlock<W>* blocks, const TriangleSet* ts, const Tr
   const uint32_t first = mbvh_ref::first_block(ref), ntris = mbvh_ref::num_tris(ref);
   for (uint32_t k = 0; k * W < ntris; ++k) {
     if constexpr (K == TriKernel::watertight) {
-      block_intersect<W>(tr, blocks[first + k], hit, lane_bits(block_tris<W>(ntris, k)));
+      block_intersect<W>(tr, blocks[first + k], hit, ntris - k * W);
     } else {
       const uint32_t lanes = block_tris<W>(ntris, k);
       for (uint32_t l = 0; l < lanes; ++l) intersect_tri<K>(*rc, *ts, (first + k) * W + l, tr.tmin, hit);
@@ -233,7 +244,7 @@ inline void leaf_test(const MBVH<N, W>& m, const TriangleSet* ts, const TriRay<W
   if constexpr (W == 8) {
     if (ntris <= m.small_leaf) {
       if constexpr (K == TriKernel::watertight) {
-        block_intersect<4>(tr.half, m.small[first], hit, lane_bits(ntris));
+        block_intersect<4>(tr.half, m.small[first], hit, ntris);
       } else {
         for (uint32_t l = 0; l < ntris; ++l) intersect_tri<K>(*rc, *ts, m.small_lane(first, l), tr.tmin, hit);
       }
