@@ -27,7 +27,30 @@ KEEP = ["mem_reads_per_ray", "treelet_mem_slots", "treelet_mem_stacks", "treelet
         "treelet_mem_other", "treelet_switches_per_ray", "treelet_rays_per_visit", "treelet_queue_rays", "treelets",
         "rays", "mismatch_rate", "false_miss", "false_hit"]
 FIELDS = ["scene", "width", "height", "workload", "rays_in_flight", "treelet_bytes", "ratio_to_mbvh8_single",
-          "mbvh8_single_mem_reads_per_ray"] + KEEP
+          "mbvh8_single_mem_reads_per_ray"] + KEEP + ["state_reads_per_ray", "other_reads_per_ray",
+                                                       "reads_if_state_48B_per_switch", "ratio_if_state_48B_per_switch",
+                                                       "ratio_if_state_free"]
+# The smallest state a suspended ray can be resumed from: origin and direction (24 bytes), closest
+# t and primitive (8), the reference it resumes at (4), its ray index (4) and one stack entry
+# (reference and entry distance, 8) = 48 bytes, 0.75 of a 64-byte line. "if_state_48B": the
+# measured scene and other reads plus that much per treelet switch, streamed from memory (a pool
+# that amortises the treelets is far larger than the L3: 65536 x 48 bytes = 3 MiB), or the measured
+# state reads where those are fewer (small pools whose state stays cached); "if_state_free":
+# the state costs nothing (Aila and Karras' on-chip queues).
+STATE_LINES_PER_SWITCH = 48 / 64
+
+
+def derive(row):
+    f = {k: float(row[k]) for k in ("mem_reads_per_ray", "treelet_mem_slots", "treelet_mem_stacks",
+                                     "treelet_switches_per_ray", "mbvh8_single_mem_reads_per_ray")}
+    state = f["treelet_mem_slots"] + f["treelet_mem_stacks"]
+    other = f["mem_reads_per_ray"] - state
+    # A smaller state never costs more lines than the measured one: the lesser of the two.
+    bound = other + min(state, STATE_LINES_PER_SWITCH * f["treelet_switches_per_ray"])
+    base = f["mbvh8_single_mem_reads_per_ray"]
+    row.update({"state_reads_per_ray": state, "other_reads_per_ray": other, "reads_if_state_48B_per_switch": bound,
+                "ratio_if_state_48B_per_switch": bound / base, "ratio_if_state_free": other / base})
+    return row
 
 
 def bandwidth(args, scheme, params):
@@ -53,7 +76,9 @@ def plot(rows, out_png, scene):
     for budget in sorted({int(r["treelet_bytes"]) for r in b2}):
         pts = sorted((int(r["rays_in_flight"]), r) for r in b2 if int(r["treelet_bytes"]) == budget)
         xs = [p[0] for p in pts]
-        axes[0].plot(xs, [float(p[1]["mem_reads_per_ray"]) for p in pts], marker="o", label=f"{budget // 1024} KiB")
+        line, = axes[0].plot(xs, [float(p[1]["mem_reads_per_ray"]) for p in pts], marker="o", label=f"{budget // 1024} KiB")
+        axes[0].plot(xs, [float(derive(dict(p[1]))["reads_if_state_48B_per_switch"]) for p in pts], ls="--", lw=1,
+                     color=line.get_color(), label=f"{budget // 1024} KiB, state of 48 B")
         state = [float(p[1]["treelet_mem_slots"]) + float(p[1]["treelet_mem_stacks"]) for p in pts]
         scene_reads = [float(p[1]["mem_reads_per_ray"]) - s for p, s in zip(pts, state)]
         line, = axes[1].plot(xs, state, marker="o", label=f"state, {budget // 1024} KiB")
@@ -66,11 +91,18 @@ def plot(rows, out_png, scene):
     axes[0].axhline(0.5 * base, color="k", lw=1, ls=":", label="goal: 0.5x mbvh8_single")
     axes[0].set_ylabel("simulated memory reads per ray")
     axes[0].set_title(f"treelet_queue, {scene} bounce:2")
-    axes[0].legend(fontsize=7)
+    axes[0].legend(fontsize=6, ncol=2)
     axes[1].set_title("split: waiting rays' state (slots + stacks) vs the rest")
     axes[1].legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(out_png, dpi=110)
+
+
+def write(path, rows):
+    with open(path, "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=FIELDS)
+        wr.writeheader()
+        wr.writerows(derive(r) for r in rows)
 
 
 def main():
@@ -104,12 +136,14 @@ def main():
                        "mbvh8_single_mem_reads_per_ray": base[w]}
                 row.update({k: r.get(k, "") for k in KEEP})
                 rows.append(row)
-            with open(args.out, "w", newline="") as f:  # after every point: an interrupted sweep resumes
-                wr = csv.DictWriter(f, fieldnames=FIELDS)
-                wr.writeheader()
-                wr.writerows(rows)
+            write(args.out, rows)  # after every point: an interrupted sweep resumes
+    write(args.out, rows)
     plot(rows, os.path.splitext(args.out)[0] + ".png", scene)
     best = min((r for r in rows if r["workload"] == "bounce:2"), key=lambda r: float(r["mem_reads_per_ray"]))
+    for key in ("ratio_if_state_48B_per_switch", "ratio_if_state_free"):
+        b = min((r for r in rows if r["workload"] == "bounce:2"), key=lambda r: float(r[key]))
+        print(f"best bounce:2 {key}: rays_in_flight={b['rays_in_flight']} treelet_bytes={b['treelet_bytes']}: "
+              f"{float(b[key]):.3f}x mbvh8_single")
     print(f"best bounce:2 point: rays_in_flight={best['rays_in_flight']} treelet_bytes={best['treelet_bytes']}: "
           f"{float(best['mem_reads_per_ray']):.2f} reads/ray = {float(best['ratio_to_mbvh8_single']):.3f}x mbvh8_single")
 
