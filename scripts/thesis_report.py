@@ -764,7 +764,8 @@ def pathtrace(R):
                     se = lambda r: num(r["rmse_sd"]) / math.sqrt(seeds)
                     z = [(num(r["rmse"]) - num(k[0]["rmse"])) / math.hypot(se(r), se(k[0])) for r in k[1:]]
                     R.out(f"- {s}, {spp} spp: PR − Ref and SPT − Ref in rmse, in standard errors of the "
-                          f"difference: {z[0]:+.1f}, {z[1]:+.1f} (one estimator, three schedules)")
+                          f"difference: {z[0]:+.1f}, {z[1]:+.1f} (one estimator, three schedules: tests/test_pathtrace.cpp; "
+                          f"each standard error rests on {seeds} heavy-tailed renderings, {seeds - 1} degrees of freedom)")
         for spp in spps:
             four = [by.get((m, str(spp))) for m in ("Ref", "PR", "DPT", "SPT")]
             if all(four):
@@ -782,14 +783,22 @@ def pathtrace(R):
                             f"v{k}{'+' if k == 6 else ''} {100 * num(dby[(m, str(spp), k)]['share']):.1f}%/"
                             f"{f(num(dby[(m, str(spp), k)]['noise_rmse']), 1)}"
                             for k in range(7) if (m, str(spp), k) in dby)
+                        nv = lambda m, ks: sum(num(dby[(m, str(spp), k)]["noise_rmse"]) ** 2
+                                               for k in ks if (m, str(spp), k) in dby)
+                        mid = range(2, min(dmax, 6) + 1)
                         why += (f" By path vertex (pathtrace.depth.csv, share of the image's energy / noise_rmse): "
-                                f"Ref {parts('Ref')}; DPT {parts('DPT')}. Vertices past DPT's d_max = {dmax} carry "
-                                f"{100 * deep('Ref'):.1f}% of Ref's energy (DPT: {100 * deep('DPT'):.1f}%, its "
-                                f"truncation bias), and the noise sits at the first vertices, where DPT and Ref "
-                                f"sample alike (every sample reaches vertex 1; DPT's deterministic 50% split of the "
-                                f"deeper vertices is a stratified roulette). In this all-diffuse, albedo ~0.6 "
-                                f"scene DPT's extra variance is small against the direct light's; the thesis "
-                                f"(§6.3.2) expects it to show with specular materials.")
+                                f"Ref {parts('Ref')}; DPT {parts('DPT')}. Vertices 0 and 1 (the camera ray reaching "
+                                f"the sky or a light, whose edges are anti-aliased by the jitter; the first light "
+                                f"sample), which every DPT and Ref sample computes alike, hold "
+                                f"{100 * nv('Ref', (0, 1)) / nv('Ref', range(7)):.0f}% of Ref's noise variance. At "
+                                f"vertices 2-{max(mid)} DPT's noise is "
+                                f"{math.sqrt(nv('DPT', mid) / nv('Ref', mid)):.2f}x Ref's (a fixed 50% survival with "
+                                f"x2 weights against Ref's albedo-based roulette: the thesis' extra variance), but "
+                                f"they hold only {100 * nv('Ref', mid) / nv('Ref', range(7)):.0f}% of it; the "
+                                f"vertices past d_max = {dmax} carry {100 * deep('Ref'):.1f}% of Ref's energy (DPT: "
+                                f"{100 * deep('DPT'):.1f}%, its truncation bias, which also drops their noise). In this "
+                                f"all-diffuse, albedo ~0.6 scene DPT's extra variance is therefore within the seeds' "
+                                f"spread of the total; the thesis (§6.3.2) expects it to show with specular materials.")
                     EXPLAIN["t14.dpt_highest"] = why
                 R.check("t14.dpt_highest", f"{s}: DPT's rmse is the highest of Ref/PR/DPT/SPT at {spp} spp",
                         worst == "DPT", "highest: " + worst + " (" + ", ".join(
