@@ -796,9 +796,15 @@ def pathtrace(R):
                                 f"x2 weights against Ref's albedo-based roulette: the thesis' extra variance), but "
                                 f"they hold only {100 * nv('Ref', mid) / nv('Ref', range(7)):.0f}% of it; the "
                                 f"vertices past d_max = {dmax} carry {100 * deep('Ref'):.1f}% of Ref's energy (DPT: "
-                                f"{100 * deep('DPT'):.1f}%, its truncation bias, which also drops their noise). In this "
-                                f"all-diffuse, albedo ~0.6 scene DPT's extra variance is therefore within the seeds' "
-                                f"spread of the total; the thesis (§6.3.2) expects it to show with specular materials.")
+                                f"{100 * deep('DPT'):.1f}%, its truncation bias, which also drops their noise). Net: DPT "
+                                f"adds {nv('DPT', mid) - nv('Ref', mid):.0f} to the noise variance at vertices "
+                                f"2-{max(mid)} and drops Ref's {nv('Ref', range(dmax + 1, 7)):.0f} past d_max, of a "
+                                f"total {nv('Ref', range(7)):.0f} (1/255 units squared), net "
+                                f"{100 * (nv('DPT', mid) - nv('Ref', mid) - nv('Ref', range(dmax + 1, 7))) / nv('Ref', range(7)):+.0f}%"
+                                f": in these all-diffuse scenes (albedo 0.52-0.65) DPT's extra variance is of the size "
+                                f"of the seeds' spread (vertex 0, computed alike by both, differs by "
+                                f"{100 * abs(nv('DPT', (0,)) / nv('Ref', (0,)) - 1):.0f}% in variance between them); the "
+                                f"thesis (§6.3.2) expects it to show with specular materials.")
                     EXPLAIN["t14.dpt_highest"] = why
                 R.check("t14.dpt_highest", f"{s}: DPT's rmse is the highest of Ref/PR/DPT/SPT at {spp} spp",
                         worst == "DPT", "highest: " + worst + " (" + ", ".join(
