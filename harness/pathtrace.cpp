@@ -105,10 +105,11 @@ struct Path {
 class Wavefront {
  public:
   Wavefront(const Scene& scene, const Traverser& tracer, const Lighting& lighting, PtMethod method,
-            const PtOptions& opt, PtStats& stats)
+            const PtOptions& opt, PtStats& stats, bool by_depth)
       : scene_(scene), tracer_(tracer), light_(lighting), method_(method), opt_(opt), stats_(stats),
         cam_(scene.views[opt.view], opt.width, opt.height), salt_(salt_hash(opt.salt)),
         accum_(size_t(opt.width) * opt.height * 3, 0.0) {
+    if (by_depth) depth_accum_.assign(kPtDepths, std::vector<double>(accum_.size(), 0.0));
     double total = 0;
     for (const AreaLight& l : light_.lights) {
       total += double(luminance(l.radiance)) * l.area;
@@ -161,6 +162,7 @@ class Wavefront {
     shadow_.packet_begin.assign(1, 0);
     shadow_contrib_.clear();
     shadow_pixel_.clear();
+    shadow_depth_.clear();
     for (uint32_t p = 0; p < ext.num_packets(); ++p) {
       for (uint32_t i = ext.packet_begin[p]; i < ext.packet_begin[p + 1]; ++i) shade(lanes[lane_of[i]], hits[i]);
       if (shadow_.rays.size() > shadow_.packet_begin.back())
@@ -172,13 +174,14 @@ class Wavefront {
     std::vector<Hit> occ(shadow_.size());
     trace(shadow_, occ);
     for (size_t i = 0; i < occ.size(); ++i)
-      if (!occ[i].hit()) add(shadow_pixel_[i], shadow_contrib_[i]);
+      if (!occ[i].hit()) add(shadow_pixel_[i], shadow_contrib_[i], shadow_depth_[i]);
   }
 
-  PtImage image(uint32_t spp) const {
-    PtImage img{opt_.width, opt_.height, std::vector<float>(accum_.size())};
-    for (size_t i = 0; i < accum_.size(); ++i) img.rgb[i] = float(accum_[i] / spp);
-    return img;
+  PtImage image(uint32_t spp) const { return to_image(accum_, spp); }
+  std::vector<PtImage> depth_images(uint32_t spp) const {
+    std::vector<PtImage> out;
+    for (const auto& a : depth_accum_) out.push_back(to_image(a, spp));
+    return out;
   }
 
  private:
@@ -188,10 +191,20 @@ class Wavefront {
     stats_.trace_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
 
-  void add(uint32_t pixel, Vec3 c) {
-    accum_[size_t(pixel) * 3 + 0] += c.x;
-    accum_[size_t(pixel) * 3 + 1] += c.y;
-    accum_[size_t(pixel) * 3 + 2] += c.z;
+  PtImage to_image(const std::vector<double>& a, uint32_t spp) const {
+    PtImage img{opt_.width, opt_.height, std::vector<float>(a.size())};
+    for (size_t i = 0; i < a.size(); ++i) img.rgb[i] = float(a[i] / spp);
+    return img;
+  }
+
+  // A contribution of path vertex `depth` (by_depth above) to the pixel.
+  void add(uint32_t pixel, Vec3 c, uint32_t depth) {
+    for (std::vector<double>* a : {&accum_, depth_accum_.empty() ? nullptr : &depth_accum_[std::min(depth, kPtDepths - 1)]})
+      if (a) {
+        (*a)[size_t(pixel) * 3 + 0] += c.x;
+        (*a)[size_t(pixel) * 3 + 1] += c.y;
+        (*a)[size_t(pixel) * 3 + 2] += c.z;
+      }
   }
 
   // The nearest light in front of the ray closer than t_max (-1: none); t and cos at the light.
@@ -288,6 +301,7 @@ class Wavefront {
     shadow_.rays.push_back(s);
     shadow_contrib_.push_back(p.thr * estimate);
     shadow_pixel_.push_back(p.pixel);
+    shadow_depth_.push_back(p.depth);
   }
 
   void shade(Path& p, const Hit& h) {
@@ -296,16 +310,16 @@ class Wavefront {
     if (li >= 0) {  // path reached a light (Alg. 6.1 lines 10-12)
       const AreaLight& l = light_.lights[size_t(li)];
       if (!p.diffuse) {
-        add(p.pixel, p.thr * l.radiance);
+        add(p.pixel, p.thr * l.radiance, p.depth);
       } else if (method_ == PtMethod::ris_mis) {  // the extension ray as MIS's BRDF sample
         const double pl = light_prob(size_t(li)) / l.area * double(tl) * tl / cos_l;
-        add(p.pixel, p.thr * l.radiance * float(p.bsdf_pdf / (p.bsdf_pdf + pl)));
+        add(p.pixel, p.thr * l.radiance * float(p.bsdf_pdf / (p.bsdf_pdf + pl)), p.depth);
       }
       p.active = false;
       return;
     }
     if (!h.hit()) {  // path left the scene: the sky (never sampled explicitly, so always added)
-      add(p.pixel, p.thr * light_.sky);
+      add(p.pixel, p.thr * light_.sky, p.depth);
       p.active = false;
       return;
     }
@@ -344,7 +358,8 @@ class Wavefront {
   std::vector<double> cdf_;
   RayBatch shadow_;
   std::vector<Vec3> shadow_contrib_;
-  std::vector<uint32_t> shadow_pixel_;
+  std::vector<uint32_t> shadow_pixel_, shadow_depth_;
+  std::vector<std::vector<double>> depth_accum_;  // by_depth (render_pathtrace), empty when not asked
 };
 
 double thread_cpu_seconds() {
@@ -415,7 +430,7 @@ PtMethod parse_pt_method(const std::string& name) {
 std::string pt_method_name(PtMethod m) { return pt_method_names()[size_t(m)]; }
 
 PtImage render_pathtrace(const Scene& scene, const Traverser& tracer, const Lighting& lighting, PtMethod method,
-                         const PtOptions& opt, PtStats* stats_out) {
+                         const PtOptions& opt, PtStats* stats_out, std::vector<PtImage>* by_depth) {
   if (opt.spp == 0) throw InputError("path tracing needs spp >= 1");
   if (opt.width == 0 || opt.height == 0) throw InputError("path tracing needs a non-empty image");
   if (opt.view >= scene.views.size())
@@ -424,7 +439,7 @@ PtImage render_pathtrace(const Scene& scene, const Traverser& tracer, const Ligh
   PtStats stats;
   const auto t0 = std::chrono::steady_clock::now();
   const double c0 = thread_cpu_seconds();
-  Wavefront wf(scene, tracer, lighting, method, opt, stats);
+  Wavefront wf(scene, tracer, lighting, method, opt, stats, by_depth != nullptr);
   // Lanes are pixels in the 16x16 tiles of the thesis' packet layout (Fig. 16): one tile is one
   // packet (and 8 warps of 32 lanes); primary_rays gives that order.
   WorkloadSpec spec;
@@ -478,6 +493,7 @@ PtImage render_pathtrace(const Scene& scene, const Traverser& tracer, const Ligh
   stats.total_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   stats.cpu_s = thread_cpu_seconds() - c0;
   if (stats_out) *stats_out = stats;
+  if (by_depth) *by_depth = wf.depth_images(opt.spp);
   return wf.image(opt.spp);
 }
 

@@ -59,8 +59,8 @@ struct PtOptions {
   uint32_t spp = 8;
   uint64_t seed = 1;
   // Independent random numbers per rendering: each sample's generator is keyed by (seed, salt,
-  // pixel, sample index). The table salts with the method name, so two methods' images are
-  // independent estimates (and the converged image independent of all of them).
+  // pixel, sample index). The table salts with method, spp and repetition, so every rendering it
+  // makes is an independent estimate (the converged image's two halves have salts of their own).
   std::string salt;
   uint32_t ris_per_light = 2;  // RIS candidates per light (§6.4.2: "two points on each light source")
 };
@@ -97,10 +97,18 @@ struct PtImage {
   std::vector<float> rgb;
 };
 
+// The image split by the path vertex a contribution comes from (docs/PATHTRACE.md, "by depth"):
+// image k holds what vertex k added — k = 0: the camera ray reaching a light or the sky; k >= 1:
+// the light sample at the k-th surface hit plus the light or sky reached by the ray leaving it —
+// and the last image every k >= kPtDepths - 1. The images sum to the rendering. It shows where
+// DPT's truncation (no vertex past log2(spp) + 1) and its fixed 50% survival cost energy and noise.
+inline constexpr uint32_t kPtDepths = 7;
+
 // Renders view `opt.view` with `method`; the traverser must be prepared on `scene`. Throws
 // InputError for spp 0, an empty image or a missing view. Deterministic given (opt, lighting).
+// by_depth, when given, receives kPtDepths images (above).
 PtImage render_pathtrace(const Scene& scene, const Traverser& tracer, const Lighting& lighting, PtMethod method,
-                         const PtOptions& opt, PtStats* stats = nullptr);
+                         const PtOptions& opt, PtStats* stats = nullptr, std::vector<PtImage>* by_depth = nullptr);
 
 // Root mean squared error over R, G, B of every pixel, in units of 1/255 of radiance 1 (display
 // white), on linear unclamped values (thesis §6.2.5: rmse against a converged image).

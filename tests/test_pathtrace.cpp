@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "harness/compare.h"
 #include "harness/pathtrace.h"
 #include "harness/tables.h"
 #include "structures/builtin_scenes.h"
@@ -148,6 +149,29 @@ TEST(PathTrace, DptKeepsTheMeanAndRaisesTheVariance) {
   EXPECT_GT(vd, 1.2 * vr) << "DPT " << vd << " Ref " << vr;
 }
 
+// The split by path vertex sums to the image; DPT at 8 spp has no vertex past d_max = 4 (its
+// truncation bias is exactly the energy Ref finds there), Ref's roulette reaches past it.
+TEST(PathTrace, ByDepthSumsToTheImageAndShowsDptsTruncation) {
+  const Fixture& f = fixture();
+  PtOptions o;
+  o.width = o.height = 32, o.spp = 8, o.salt = "depth";
+  for (PtMethod m : {PtMethod::ref, PtMethod::dpt, PtMethod::ris_mis}) {
+    std::vector<PtImage> parts;
+    const PtImage img = render_pathtrace(f.scene, *f.tracer, f.lighting, m, o, nullptr, &parts);
+    ASSERT_EQ(parts.size(), size_t(kPtDepths));
+    PtImage sum = img;
+    std::fill(sum.rgb.begin(), sum.rgb.end(), 0.f);
+    for (const PtImage& p : parts)
+      for (size_t i = 0; i < sum.rgb.size(); ++i) sum.rgb[i] += p.rgb[i];
+    EXPECT_LT(pt_rmse(sum, img), 1e-3) << pt_method_name(m);
+    EXPECT_EQ(render_pathtrace(f.scene, *f.tracer, f.lighting, m, o).rgb, img.rgb) << "the split changes nothing";
+    const double deep = pt_mean(parts[5]) + pt_mean(parts[6]);
+    if (m == PtMethod::dpt) EXPECT_EQ(deep, 0.0);
+    else EXPECT_GT(deep, 0.0) << pt_method_name(m);
+    EXPECT_GT(pt_mean(parts[1]), pt_mean(parts[2])) << "the first bounce carries the most";
+  }
+}
+
 // Every sample index gets the segment count of the thesis' list (spp = 16: 1 x8, 2 x4, 3 x2, 4, 5):
 // DPT traces sum(d_max) extension rays per pixel at most.
 TEST(PathTrace, DptSegmentBudget) {
@@ -194,7 +218,7 @@ TEST(PathTrace, TableWritesRowsImagesAndReusesTheConvergedCache) {
   opt.run.schemes = {"bvh_single"};
   opt.run.width = opt.run.height = 16;
   opt.run.progress = false;
-  opt.run.scheme_config.params = {{"min_spp", "2"}, {"max_spp", "4"}, {"ref_spp", "8"}};
+  opt.run.scheme_config.params = {{"min_spp", "2"}, {"max_spp", "4"}, {"ref_spp", "8"}, {"seeds", "2"}};
   opt.csv = (dir / "pt.csv").string();
   ASSERT_EQ(run_table("pathtrace", opt), 0);
   std::ifstream csv(opt.csv);
@@ -202,11 +226,25 @@ TEST(PathTrace, TableWritesRowsImagesAndReusesTheConvergedCache) {
   int rows = -1;
   while (std::getline(csv, line)) ++rows;
   EXPECT_EQ(rows, 6 * 2) << "six methods x spp 2, 4";
+  const CsvTable table = read_csv(opt.csv);
+  auto col = [&](size_t row, const char* name) { return std::stod(table.at(row, table.column(name))); };
+  for (size_t i = 0; i < table.rows.size(); ++i) {
+    EXPECT_EQ(col(i, "seeds"), 2);
+    EXPECT_GT(col(i, "rmse_sd"), 0.0) << "two independent renderings differ";
+    EXPECT_GT(col(i, "noise_rmse"), 0.0);
+    EXPECT_LE(col(i, "rmse_min"), col(i, "rmse_max"));
+    EXPECT_LT(col(i, "rmse_corr"), col(i, "rmse_max")) << "the converged image's residual removed";
+  }
+  std::ifstream depth(dir / "pt.depth.csv");
+  rows = -1;
+  while (std::getline(depth, line)) ++rows;
+  EXPECT_EQ(rows, 6 * 2 * int(kPtDepths)) << "method x spp x vertex";
   for (const char* png : {"pt_converged.png", "pt_ref.png", "pt_ris_mis.png", "pt_spt.png"})
     EXPECT_TRUE(std::filesystem::exists(dir / png)) << png;
   nlohmann::json side;
   std::ifstream(dir / "pt_converged.json") >> side;
   EXPECT_EQ(side["key"]["spp"], 8);
+  EXPECT_GT(side["residual_rmse"].get<double>(), 0.0) << "two halves of 4 spp differ";
   const auto t0 = std::filesystem::last_write_time(dir / "pt_converged.bin");
   ASSERT_EQ(run_table("pathtrace", opt), 0);
   EXPECT_EQ(std::filesystem::last_write_time(dir / "pt_converged.bin"), t0) << "reused";
