@@ -77,25 +77,24 @@ inline __m256i sort8(__m256i k) {
 // for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
 // reciprocal, pad, multiply — is the same as box_entry's, so the same bound holds), and the rows
 // of the near and far planes per axis (sign-selected slabs, Williams et al. 2005).
-// The reciprocals are stored NEGATED: box_test computes (origin - plane) * -inv, which is
-// (plane - origin) * inv exactly (IEEE negation is exact and commutes with rounding; only the sign
-// of a zero product can differ, and a zero never decides the slab test: the running bounds are
-// the max/min's second operands on ties). The point is the subtraction's operand order: vsubps
-// takes its memory operand second, so origin - plane folds the node row's load into the
-// subtraction — one instruction per plane, six per node test fewer (callgrind, sponza primary
-// 128x128, mbvh4_single: see docs/PERFORMANCE.md, session 7).
+// The origin is stored NEGATED: box_test computes plane + (-origin), which is plane - origin
+// exactly (IEEE negation is exact, and x + (-y) is the same operation as x - y, signed zeros
+// included), so the test's values are bit-identical to slab's. The point is the operand order:
+// addition commutes, so the node row's load folds into the vaddps as its memory operand — one
+// instruction per plane, six per node test fewer than a load and a vsubps (callgrind, sponza
+// primary 128x128, mbvh4_single: docs/PERFORMANCE.md, session 7).
 template <int N>
 struct NodeRay {
   using f = typename simd::V<N>::f;
-  f ox, oy, oz, nix, niy, niz, nfx, nfy, nfz, tmin;  // nix = -1/dir.x, nfx = -(1/dir.x * kFarPad)
+  f nox, noy, noz, ix, iy, iz, fx, fy, fz, tmin;  // nox = -org.x
   uint32_t near[3], far[3];  // float offsets into MBVHNode::box
   NodeRay(const RayCtx& rc, float t0) { init(rc.org, rc.inv, t0); }
   NodeRay(Vec3 org, Vec3 inv, float t0) { init(org, inv, t0); }
   void init(Vec3 org, Vec3 inv, float t0) {
     using S = simd::V<N>;
-    ox = S::set1(org.x), oy = S::set1(org.y), oz = S::set1(org.z);
-    nix = S::set1(-inv.x), niy = S::set1(-inv.y), niz = S::set1(-inv.z);
-    nfx = S::set1(-(inv.x * kFarPad)), nfy = S::set1(-(inv.y * kFarPad)), nfz = S::set1(-(inv.z * kFarPad));
+    nox = S::set1(-org.x), noy = S::set1(-org.y), noz = S::set1(-org.z);
+    ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
+    fx = S::set1(inv.x * kFarPad), fy = S::set1(inv.y * kFarPad), fz = S::set1(inv.z * kFarPad);
     tmin = S::set1(t0);
     for (int a = 0; a < 3; ++a) {
       const bool neg = std::signbit(inv[a]);
@@ -107,17 +106,17 @@ struct NodeRay {
 
 // Entry distances `tn` of the N children and the lanes the ray enters before `tfar` (all-ones
 // lanes; movemask gives the bits): the kernel library's slab test on N lanes, one lane per child,
-// with the far reciprocal padded per ray (kPadRcp), on the negated operands NodeRay explains.
+// with the far reciprocal padded per ray (kPadRcp), plane - origin taken as NodeRay explains.
 template <int N>
 [[gnu::always_inline]] inline typename simd::V<N>::f box_test(const MBVHNode<N>& nd, const NodeRay<N>& r, float tfar,
                                                               typename simd::V<N>::f& tn_out) {
   using S = simd::V<N>;
   const float* b = &nd.box[0][0];
-  const typename S::f xn[3] = {S::sub(r.ox, S::load(b + r.near[0])), S::sub(r.oy, S::load(b + r.near[1])),
-                               S::sub(r.oz, S::load(b + r.near[2]))};
-  const typename S::f xf[3] = {S::sub(r.ox, S::load(b + r.far[0])), S::sub(r.oy, S::load(b + r.far[1])),
-                               S::sub(r.oz, S::load(b + r.far[2]))};
-  const typename S::f rn[3] = {r.nix, r.niy, r.niz}, rf[3] = {r.nfx, r.nfy, r.nfz};
+  const typename S::f xn[3] = {S::add(r.nox, S::load(b + r.near[0])), S::add(r.noy, S::load(b + r.near[1])),
+                               S::add(r.noz, S::load(b + r.near[2]))};
+  const typename S::f xf[3] = {S::add(r.nox, S::load(b + r.far[0])), S::add(r.noy, S::load(b + r.far[1])),
+                               S::add(r.noz, S::load(b + r.far[2]))};
+  const typename S::f rn[3] = {r.ix, r.iy, r.iz}, rf[3] = {r.fx, r.fy, r.fz};
   return slab<N, true>(xn, xf, rn, rf, r.tmin, S::set1(tfar), tn_out);
 }
 

@@ -64,8 +64,15 @@ inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n) {
 // group_box with the node's work hoisted out of the per-group loop: when every group of a
 // common-origin packet shares its direction signs (primary packets away from the axis planes),
 // the near/far plane offsets (plane - org) are the same scalars for every group, so they are
-// broadcast once per node and each group test is 6 multiplies, 6 min/max and a compare. The
-// values are exactly group_box's (same scalar subtraction, same operation order).
+// broadcast once per node. The far offset is also padded once per node, (plane - org) * kFarPad,
+// and each group test is slab<8, kPadRcp = true> on it: 6 multiplies (instead of 9), 6 min/max
+// and a compare. The far distance
+// is then ((pf - o) * pad) * inv instead of ((pf - o) * inv) * pad: the same roundings (subtract,
+// reciprocal, pad, multiply), so Ize's bound holds as it does for the MBVH layouts' inv * pad
+// (kernels.h slab); the values may differ from box_mask's in the last bit, never in which boxes
+// a ray really enters, so hits are unchanged (tests/test_packets.cpp compares them with the
+// single-ray schemes). Callgrind, sponza primary 128x128: bvh_partition 36.67 M -> see
+// docs/PERFORMANCE.md, session 7.
 template <bool kCommon>
 struct NodeTester {
   const Packet& p;
@@ -81,7 +88,7 @@ struct NodeTester {
         for (int a = 0; a < 3; ++a) {
           const bool neg = (p.psign >> a) & 1;
           xn[a] = _mm256_set1_ps((neg ? hi[a] : lo[a]) - p.org[a]);
-          xf[a] = _mm256_set1_ps((neg ? lo[a] : hi[a]) - p.org[a]);
+          xf[a] = _mm256_set1_ps(((neg ? lo[a] : hi[a]) - p.org[a]) * kFarPad);
         }
       }
     }
@@ -90,7 +97,7 @@ struct NodeTester {
     if (!pre) return group_box<kCommon>(p, g, n);
     const RayGroup& G = p.rg[g];
     __m256 tn;
-    return uint32_t(_mm256_movemask_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
+    return uint32_t(_mm256_movemask_ps(slab<8, true>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
   }
 };
 
