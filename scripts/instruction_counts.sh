@@ -64,7 +64,7 @@ own_params() {
   local known i
   known=$($TB list params "$1")
   for ((i = 0; i + 1 < ${#params[@]}; i += 2)); do
-    grep -q "^  ${params[i + 1]%%=*} " <<<"$known" && printf '%s\n%s\n' "${params[i]}" "${params[i + 1]}"
+    grep -q "^${params[i + 1]%%=*} " <<<"$known" && printf '%s\n%s\n' "${params[i]}" "${params[i + 1]}"
   done
   return 0
 }

@@ -470,18 +470,24 @@ def ranged_work(scene):
     return out
 
 
-def cost_rows(scene):
-    """`PROFILE=1 scripts/instruction_counts.sh` (results/<scene>/cost_per_ray.csv): per scheme and workload,
-    callgrind's instructions, D1/LL misses and mispredicted branches per ray, and the same binary's native
-    time on the same cells (one process)."""
-    return {(r["scheme"], r["workload"]): r for r in ours(scene, "cost_per_ray")}
+# The stream schemes in the thesis' 4-wide layout (mbvh_rs, raygrid with --param width=4) were counted and
+# timed in a run of their own beside mbvh4_single: cost_per_ray_4wide.csv.
+FOUR_WIDE = ("mbvh_rs", "raygrid")
+
+
+def cost_rows(scene, scheme=None):
+    """`PROFILE=1 scripts/instruction_counts.sh` (results/<scene>/cost_per_ray.csv, or cost_per_ray_4wide.csv for
+    the schemes of FOUR_WIDE): per scheme and workload, callgrind's instructions, D1/LL misses and mispredicted
+    branches per ray, and the same binary's native time on the same cells (one process)."""
+    stem = "cost_per_ray_4wide" if scheme in FOUR_WIDE else "cost_per_ray"
+    return {(r["scheme"], r["workload"]): r for r in ours(scene, stem)}
 
 
 def work_and_rate(scene, scheme, base="mbvh4_single", workload="bounce:3"):
     """Splits the speed of `scheme` relative to `base` into work and rate: time ratio = work ratio (base's
     instructions per ray over the scheme's) x rate ratio (the scheme's instructions retired per ns over
     the base's). Returns (text, work ratio, rate ratio), or None without cost_per_ray.csv rows."""
-    c = cost_rows(scene)
+    c = cost_rows(scene, scheme)
     a, b = c.get((scheme, workload)), c.get((base, workload))
     if not a or not b:
         return None
@@ -493,7 +499,7 @@ def work_and_rate(scene, scheme, base="mbvh4_single", workload="bounce:3"):
     kilo = lambda r, k: 1000 * num(r[k]) / num(r["instructions_per_ray"])
     per_k = lambda k: f"{kilo(a, k):.1f} vs {kilo(b, k):.1f}"
     spread = lambda r: num(r["mrays_max"]) / num(r["mrays_min"])
-    text = (f"{scheme} vs {base} on {workload} ({a['image']}, cost_per_ray.csv: callgrind, and the same binary timed, "
+    text = (f"{scheme} vs {base} on {workload} ({a['image']}, {'cost_per_ray_4wide.csv, ' + a['params'] if scheme in FOUR_WIDE else 'cost_per_ray.csv'}: callgrind, and the same binary timed, "
             f"{a['time_reps']} reps, max/min {spread(a):.2f}x and {spread(b):.2f}x): instructions per ray "
             f"{pair('instructions_per_ray', 0)}, i.e. by work {100 * work:.0f}% of {base}; instructions retired per ns "
             f"{pair('instructions_per_ns', 2)} ({rate:.2f}x); time {100 * time:.0f}% (= work x rate); per 1000 "
@@ -718,7 +724,7 @@ def raygrid(R):
         if wr and 3 in ks:
             csv_rate = g("raygrid", 3) / g("mbvh4_single", 3) / wr[1]
             numbers += "; " + wr[0] + f"; raygrid.csv's bounce-3 time ratio over this work ratio: rate {csv_rate:.2f}x"
-            base = cost_rows(s)[("mbvh4_single", "bounce:3")]
+            base = cost_rows(s, "raygrid")[("mbvh4_single", "bounce:3")]
             if wr[1] < 1 and min(wr[2], csv_rate) >= 0.9 and num(base["ll_misses_per_ray"]) < 0.1:
                 variant = "costed"
         R.check("t9.rg_beats_single", f"{s}: RayGrid outperforms single-ray MBVH at every bounce",
