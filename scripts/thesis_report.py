@@ -92,7 +92,8 @@ SCENE_WORK = (
     "single-ray executes fewer instructions per ray on it than on the others (printed).")
 COSTED_BELOW = (
     "measured: the host's retire rate, not the work. Split as printed (work x rate): by work our scheme is below even "
-    "the thesis' range, so it does no less work relative to single-ray than the thesis'; it is above the range in time "
+    "the thesis' range (it executes more instructions per ray than single-ray), so less work is not what puts it "
+    "above; it is above the range in time "
     "because the rate estimates printed exceed 1 — " + RATE_WHY + ".")
 EXPLAIN = {
     "t14.sqrt_spp": (
