@@ -12,6 +12,7 @@
 #include <immintrin.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstdint>
 #include <span>
@@ -83,11 +84,28 @@ inline __m256i sort8(__m256i k) {
 // addition commutes, so the node row's load folds into the vaddps as its memory operand — one
 // instruction per plane, six per node test fewer than a load and a vsubps (callgrind, sponza
 // primary 128x128, mbvh4_single: docs/PERFORMANCE.md, session 7).
+// Float offsets into MBVHNode<N>::box of the near (0..2) and far (3..5) plane row of each axis,
+// by ray octant (bit a set: direction a negative, entered through hi). A per-ray pointer into this
+// table replaces six per-ray offsets: g++ 12 kept those in stack slots anyway, loaded at every
+// node, so the node test is unchanged and the ray setup saves their computation and stores
+// (callgrind, dragon_100k primary 128x128: docs/PERFORMANCE.md, session 7).
+template <int N>
+inline constexpr std::array<std::array<uint32_t, 6>, 8> kPlaneRows = [] {
+  std::array<std::array<uint32_t, 6>, 8> t{};
+  for (int o = 0; o < 8; ++o)
+    for (int a = 0; a < 3; ++a) {
+      const bool neg = (o >> a) & 1;
+      t[o][a] = uint32_t(((neg ? 3 : 0) + a) * N);
+      t[o][3 + a] = uint32_t(((neg ? 0 : 3) + a) * N);
+    }
+  return t;
+}();
+
 template <int N>
 struct NodeRay {
   using f = typename simd::V<N>::f;
   f nox, noy, noz, ix, iy, iz, fx, fy, fz, tmin;  // nox = -org.x
-  uint32_t near[3], far[3];  // float offsets into MBVHNode::box
+  const uint32_t* rows;  // kPlaneRows<N> of the ray's octant
   NodeRay(const RayCtx& rc, float t0) { init(rc.org, rc.inv, t0); }
   NodeRay(Vec3 org, Vec3 inv, float t0) { init(org, inv, t0); }
   void init(Vec3 org, Vec3 inv, float t0) {
@@ -96,11 +114,7 @@ struct NodeRay {
     ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
     fx = S::set1(inv.x * kFarPad), fy = S::set1(inv.y * kFarPad), fz = S::set1(inv.z * kFarPad);
     tmin = S::set1(t0);
-    for (int a = 0; a < 3; ++a) {
-      const bool neg = std::signbit(inv[a]);
-      near[a] = uint32_t(((neg ? 3 : 0) + a) * N);
-      far[a] = uint32_t(((neg ? 0 : 3) + a) * N);
-    }
+    rows = kPlaneRows<N>[int(std::signbit(inv.x)) | int(std::signbit(inv.y)) << 1 | int(std::signbit(inv.z)) << 2].data();
   }
 };
 
@@ -112,10 +126,11 @@ template <int N>
                                                               typename simd::V<N>::f& tn_out) {
   using S = simd::V<N>;
   const float* b = &nd.box[0][0];
-  const typename S::f xn[3] = {S::add(r.nox, S::load(b + r.near[0])), S::add(r.noy, S::load(b + r.near[1])),
-                               S::add(r.noz, S::load(b + r.near[2]))};
-  const typename S::f xf[3] = {S::add(r.nox, S::load(b + r.far[0])), S::add(r.noy, S::load(b + r.far[1])),
-                               S::add(r.noz, S::load(b + r.far[2]))};
+  const uint32_t* row = r.rows;
+  const typename S::f xn[3] = {S::add(r.nox, S::load(b + row[0])), S::add(r.noy, S::load(b + row[1])),
+                               S::add(r.noz, S::load(b + row[2]))};
+  const typename S::f xf[3] = {S::add(r.nox, S::load(b + row[3])), S::add(r.noy, S::load(b + row[4])),
+                               S::add(r.noz, S::load(b + row[5]))};
   const typename S::f rn[3] = {r.ix, r.iy, r.iz}, rf[3] = {r.fx, r.fy, r.fz};
   return slab<N, true>(xn, xf, rn, rf, r.tmin, S::set1(tfar), tn_out);
 }
