@@ -69,12 +69,22 @@ for v in "${view_list[@]}"; do
     f="$work/v${v}_d$d"
     $TB rays --scene "$scene_link" --workload "divergence:$d" --width 1280 --height 800 --view "$v" --out "$f.full.rays" 2>"$f.log" ||
       { cat "$f.log" >&2; exit 1; }
-    /usr/bin/python3 - "$f.full.rays" "$f.rays" "$STRIDE" <<'EOF'
-import struct, sys
+    /usr/bin/python3 - "$f.full.rays" "$f.rays" "$STRIDE" "$d" <<'EOF'
+import math, struct, sys
 raw = open(sys.argv[1], "rb").read()
 count, psize, pcount = struct.unpack("<QII", raw[8:24])
-if raw[:8] != b"TBRAYS1\0" or pcount != 0 or psize != 256 or count % psize:
-    sys.exit(f"divergence_counts: {sys.argv[1]}: expected uniform 256-ray packets")
+if raw[:8] != b"TBRAYS1\0" or pcount != 0 or psize != 256 or count != 1280 * 800:
+    sys.exit(f"divergence_counts: {sys.argv[1]}: expected 1280x800 rays in uniform 256-ray packets")
+# The camera check: the first two rays of the tile at the image centre (row 25, column 40 of 80 tiles; rays 0
+# and 1 are horizontal neighbours, the 2x2 groups of the Fig. 16 order) are 0.034 deg * D apart (less the
+# cos^2 fall-off one pixel off the centre, 0.3%).
+first = lambda i: struct.unpack("<8f", raw[24 + 32 * i: 56 + 32 * i])[3:6]
+a, b = first((25 * 80 + 40) * 256), first((25 * 80 + 40) * 256 + 1)
+deg = math.degrees(math.acos(sum(x * y for x, y in zip(a, b)) / math.dist(a, (0, 0, 0)) / math.dist(b, (0, 0, 0))))
+want = 0.034 * int(sys.argv[4])
+if abs(deg / want - 1) > 0.01:
+    sys.exit(f"divergence_counts: {sys.argv[1]}: centre rays {deg:.4f} deg apart, not {want:.4f} (thesis camera)")
+print(f"divergence_counts: D={sys.argv[4]}: centre tile's first two rays {deg:.4f} deg apart ({want:.3f} wanted)", file=sys.stderr)
 stride, rec = int(sys.argv[3]), 32 * psize
 packets = [raw[24 + i * rec: 24 + (i + 1) * rec] for i in range(0, count // psize, stride)]
 with open(sys.argv[2], "wb") as out:
