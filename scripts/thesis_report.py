@@ -131,6 +131,21 @@ EXPLAIN = {
         "16×16 packets). A documented difference that is not measured: Arauna tests the active rays of a range in "
         "SIMD groups of four (§3.3, SSE), our bvh_ranged in 8-lane AVX2 groups, so the per-ray scan cost that grows "
         "with D is halved here; the kernel has no 4-lane variant to measure it with."),
+    "t2-4.d8@costed": (
+        "measured: the host's retire rate, not the work. By executed instructions (callgrind, printed) ranged keeps "
+        "the thesis' share at D = 8 in every view over the bar: its time ratio there is that work ratio times a rate "
+        "ratio over 1 (D = 8's instructions retired faster per ns than D = 1's in the timed run, printed) — the same "
+        "split as the bounce-depth checks; the thesis gives no instruction counts, so its own rate ratio is unknown. "
+        "A rate ratio this close to 1 is within the run-to-run spread of these cells (how far the same ranged cell "
+        "moved between two Sponza runs is printed with Sponza's ordering check, divergence_thesis_repeat.csv)."),
+    "t2-4.d8@work": (
+        "measured: the work, not the rate. By executed instructions alone (callgrind, printed) ranged keeps more than "
+        "31% at D = 8 in every view over the bar, whatever the rate (the rate ratios printed straddle 1): its "
+        "packets stay coherent — with the nodes per ray unchanged, the rays per visited node fall by less from "
+        "D = 1 to D = 8 here (printed) than on sibenik_lucy (printed with its check), whose work does reach the "
+        "thesis' share. Which property keeps them together is not measured: the scene and the views are not the thesis' "
+        "(66k-triangle Sponza here, 93k there; our scenes.json views under the thesis camera, docs/WORKLOADS.md), "
+        "and the thesis' own Sponza views cannot be run."),
     "t2-4.monotone@unrepeated": (
         "measured: not reproducible — run-to-run noise of the packet cells. A repeat with the same settings minutes "
         "later (printed) falls with every doubling of D in every view, and the same ranged cell moved between the "
@@ -239,15 +254,25 @@ EXPLAIN = {
         "documented: this CSV ran the 8-wide layouts, not the thesis' 4-wide ones; `travbench table cache` now "
         "pins width=4 (the `layout` column)."),
     "t11.cost_rg_below_rs": UNEXPLAINED,
+    "t11.reads_per_ray@nobyrays": (
+        "unexplained in part. Measured: the unit explains a factor of 3–4, not the gap (per 4-byte word ~1.6x "
+        "more, every load the code executes ~3.5x more; figures above); the remaining ~7x, the same for loads and "
+        "stores, is what a different ray count would give, but the thesis does not say how many rays its Table 11 "
+        "traced (512 × 512 is assumed here). `scripts/cache_by_rays.sh` measures whether the per-ray figure "
+        "depends on the ray count."),
     "t11.reads_per_ray": (
-        "unexplained in part. Measured: the unit explains a factor of 3–4, not the gap. Our simulator is fed "
-        "only the data-structure accesses the probes name (one per 64-byte line); per 4-byte word the same "
-        "trace counts ~1.6x more (table above); every load the code executes, locals and spills included "
-        "(callgrind Dr: the thesis \"uses code instrumentation to record reads and writes\", §5.4), ~3.5x more. "
-        "The thesis' reads and its writes (L1 write hits alone) per ray are then both about 7–8x ours (figures above): the same factor "
-        "for loads and stores is what a different ray count would give, not a different unit, but the thesis "
-        "does not say how many rays its Table 11 traced (512 × 512 is assumed here), so the remaining ~7x is "
-        "not settled."),
+        "unexplained in part; measured as far as the thesis allows, the rest unknowable from it. Measured: the "
+        "unit explains a factor of 3–4, not the gap. Our simulator is fed only the data-structure accesses the "
+        "probes name (one per 64-byte line); per 4-byte word the same trace counts ~1.6x more (table above); "
+        "every load the code executes, locals and spills included (callgrind Dr: the thesis \"uses code "
+        "instrumentation to record reads and writes\", §5.4), ~3.5x more. The per-ray figure does not depend on "
+        "how many rays are traced (cache_by_rays.csv: the max/min over the ray counts printed) "
+        "and hardly on the path depth (primary to bounce 4, printed), so a ray count enters only as the divisor "
+        "of the thesis' totals: at our per-ray cost they are the rays per pixel printed — by loads and by stores "
+        "(callgrind Dr, Dw) close to each other, what several path segments or samples per pixel of a 512 × 512 image "
+        "would give. The thesis says \"hit counts are in 10^6 hits for a 512x512 image\" (Table 11's caption) and "
+        "not how many samples or segments per pixel that image took, so whether its image held that many rays per pixel "
+        "is unknowable from it: the gap is consistent with a ray-count difference and not settled."),
     "t11.reads_per_ray@noloads": UNEXPLAINED,
     "t11.l3_rg_below_rs": UNEXPLAINED,
     "t12.d8_94": (
@@ -447,9 +472,52 @@ def divergence(R):
         # §6.2.1: "CPU ray traversal efficiency drops to 30% or less for D=8" (thesis: 21-31%)
         d8 = [num(r["pct_of_d1"]) for r in rows if r["divergence"] == "8"]
         if d8:
+            numbers = ", ".join(f"{x:.0f}%" for x in d8) + spread_text
+            # "unrepeated" is the ordering check's (a repeat restores it); the D = 8 share is not repeated.
+            variant = None if variant == "unrepeated" else variant
+            if variant is None and max(d8) > 31.5:
+                numbers, variant = d8_work_and_rate(s, rows, numbers)
             R.check("t2-4.d8", f"{s}: at D = 8 ranged packets keep ≤ 31% of D = 1 (thesis 21–31%, §6.2.1 "
-                    "“drops to 30% or less”)", max(d8) <= 31.5, ", ".join(f"{x:.0f}%" for x in d8) + spread_text, variant)
+                    "“drops to 30% or less”)", max(d8) <= 31.5, numbers, variant)
         R.out()
+
+
+def d8_work_and_rate(scene, rows, numbers):
+    """The D = 8 / D = 1 time ratio of bvh_ranged split into work x rate (scripts/divergence_counts.sh:
+    callgrind instructions per ray on a packet subsample of the same 1280x800 thesis-camera rays,
+    <scene>/divergence_counts.csv; nodes and rays per visited node on the full image, divergence_stats.csv).
+    Returns (numbers, variant): "costed" where every view over the bar is within it by work (the time ratio's
+    excess is the rate), "work" where every such view is over it by work too; None without the CSVs."""
+    counts = {(r["scheme"], r["view"], r["divergence"]): r for r in ours(scene, "divergence_counts")}
+    stats = {(r["scheme"], r["view"], r["workload"]): r for r in ours(scene, "divergence_stats")}
+    time = {r["view"]: num(r["pct_of_d1"]) / 100 for r in rows if r["divergence"] == "8"}
+    views = sorted(v for v in time if ("bvh_ranged", v, "1") in counts and ("bvh_ranged", v, "8") in counts)
+    if not views:
+        return numbers, None
+    ipr = lambda sc, v, d: num(counts[(sc, v, d)]["instructions_per_ray"])
+    work = {v: ipr("bvh_ranged", v, "1") / ipr("bvh_ranged", v, "8") for v in views}
+    any_c = counts[("bvh_ranged", views[0], "1")]
+    parts = [f"view {v}: by work {100 * work[v]:.0f}% ({ipr('bvh_ranged', v, '1'):.0f} → {ipr('bvh_ranged', v, '8'):.0f} "
+             f"instructions per ray), time {100 * time[v]:.0f}%, so rate {time[v] / work[v]:.2f}x" for v in views]
+    numbers += (f"; split into work x rate (divergence_counts.csv: callgrind on every {any_c['packet_stride']}th 16×16 "
+                f"packet of the same {any_c['image']} thesis-camera rays, {any_c['rays']} rays per cell; time from this "
+                "CSV): " + "; ".join(parts))
+    if all(("mbvh4_single", v, d) in counts for v in views for d in ("1", "8")):
+        numbers += ("; single-ray control by work (D = 1 over D = 8 instructions per ray): " + ", ".join(
+            f"view {v} {100 * ipr('mbvh4_single', v, '1') / ipr('mbvh4_single', v, '8'):.0f}%" for v in views))
+    st = lambda v, d, k: num(stats[("bvh_ranged", v, f"divergence:{d}")][k])
+    if all(("bvh_ranged", v, f"divergence:{d}") in stats for v in views for d in ("1", "8")):
+        numbers += ("; rays per visited node D = 1 → 8 (divergence_stats.csv, full image): " + ", ".join(
+            f"view {v} {st(v, '1', 'rays_per_node'):.0f} → {st(v, '8', 'rays_per_node'):.0f} "
+            f"({100 * st(v, '8', 'rays_per_node') / st(v, '1', 'rays_per_node'):.0f}%)" for v in views) +
+            "; nodes per ray " + ", ".join(f"view {v} {st(v, '1', 'nodes_per_ray'):.1f} → {st(v, '8', 'nodes_per_ray'):.1f}"
+                                          for v in views))
+    over = [v for v in views if time[v] > 0.315]
+    if over and all(work[v] <= 0.315 for v in over):
+        return numbers, "costed"
+    if over and all(work[v] > 0.315 for v in over):
+        return numbers, "work"
+    return numbers, None
 
 
 def t7_rows(scene):
@@ -824,8 +892,28 @@ def cache(R):
                         f"{x['image']}): {f(num(x['loads_per_ray']), 0)} per ray, thesis {t_reads['mbvh_rs'] / num(x['loads_per_ray']):.1f}x "
                         f"that; every store (Dw) {f(num(x['stores_per_ray']), 0)} per ray against the thesis' {f(t_writes, 0)} "
                         f"L1 write hits per ray (a lower bound of its writes), {t_writes / num(x['stores_per_ray']):.1f}x")
+        # Does the per-ray figure depend on how many rays were traced (scripts/cache_by_rays.sh)?
+        by_rays = [r for r in ours("conference", "cache_by_rays") if r["scheme"] == "mbvh_rs"]
+        b2 = [r for r in by_rays if r["workload"] == "bounce:2"]
+        if b2:
+            per = [num(r["read_lines_per_ray"]) for r in b2]
+            big = max(b2, key=lambda r: int(r["rays"]))
+            deep = [r for r in by_rays if r["image"] == big["image"]]
+            numbers += (f"; reads per ray by ray count (`results/conference/cache_by_rays.csv`, mbvh_rs {b2[0]['params']}, "
+                        "bounce:2): " + ", ".join(f"{r['image']} ({r['rays']} rays) {f(num(r['read_lines_per_ray']), 1)}"
+                                                  for r in b2) +
+                        f" lines/ray, max/min {max(per) / min(per):.3f}x; by path depth at {big['image']}: " +
+                        ", ".join(f"{r['workload']} {f(num(r['read_lines_per_ray']), 0)}" for r in deep) +
+                        f" (max/min {max(num(r['read_lines_per_ray']) for r in deep) / min(num(r['read_lines_per_ray']) for r in deep):.2f}x)"
+                        f"; the thesis' totals over its 512 × 512 image at our per-ray cost would be "
+                        f"{t_reads['mbvh_rs'] / num(rs['read_lines_per_ray']):.0f} rays per pixel in lines" +
+                        (f", {t_reads['mbvh_rs'] / num(x['loads_per_ray']):.1f} by loads (Dr) and "
+                         f"{t_writes / num(x['stores_per_ray']):.1f} by stores (Dw)" if x else ""))
+            variant_t11 = None if x else "noloads"
+        else:
+            variant_t11 = "nobyrays" if x else "noloads"
         R.check("t11.reads_per_ray", "Our simulated reads per ray are the thesis' within 2x (MBVH/RS)", 0.5 <= ratio <= 2,
-                numbers, None if x else "noloads")
+                numbers, variant_t11)
     R.out()
 
 
