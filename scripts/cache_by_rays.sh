@@ -48,11 +48,8 @@ for n in sizes:
                      "read_lines_per_pixel": f"{reads / pixels:.2f}", "l1_read_hit_m": r["l1_read_hit_m"],
                      "l1_write_hit_m": r["l1_write_hit_m"], "mem_read_m": r["mem_read_m"]})
 with open(out, "w", newline="") as f:
-    w = csv.DictWriter(f, fieldnames=list(rows[0]))
-    w.writeheader()
-    w.writerows(rows)
-for r in rows:
-    print(f"{r['image']:>8} {r['workload']:<10} rays {r['rays']:>8} reads/ray {r['read_lines_per_ray']:>8} "
-          f"writes/ray {r['write_lines_per_ray']:>7} reads/pixel {r['read_lines_per_pixel']:>8}")
+    w = csv.DictWriter(f, fieldnames=list(rows[0])); w.writeheader(); w.writerows(rows)
+print("\n".join(f"{r['image']:>8} {r['workload']:<10} rays {r['rays']:>8} reads/ray {r['read_lines_per_ray']:>8} "
+                f"writes/ray {r['write_lines_per_ray']:>7} reads/pixel {r['read_lines_per_pixel']:>8}" for r in rows))
 print(f"-> {out}", file=sys.stderr)
 EOF
