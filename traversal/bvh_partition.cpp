@@ -54,19 +54,20 @@ class BVHPartition final : public BVHPacketScheme<BVHPartition> {
       bool culled = ia_misses(pk.ia, nd);
       if constexpr (kCommon) culled = culled || frustum_culls(pk, nd);
       if (!culled) {
-        const NodeTester<kCommon> box(pk, nd);
-        for (uint32_t i = 0; i < count; ++i) {
-          const uint32_t g = idx[i];
-          probe.read(&idx[i], 1);
-          probe.read(&pk.rg[g], sizeof(RayGroup));
-          const uint32_t m = box(g);
-          if (m) {
-            lanes[g] = uint8_t(m);
-            std::swap(idx[active], idx[i]);
-            probe.write(&idx[active], 1);
-            ++active;
+        NodeTester<kCommon>(pk, nd).with_test([&](auto box) {
+          for (uint32_t i = 0; i < count; ++i) {
+            const uint32_t g = idx[i];
+            probe.read(&idx[i], 1);
+            probe.read(&pk.rg[g], sizeof(RayGroup));
+            const uint32_t m = box(g);
+            if (m) {
+              lanes[g] = uint8_t(m);
+              std::swap(idx[active], idx[i]);
+              probe.write(&idx[active], 1);
+              ++active;
+            }
           }
-        }
+        });
       }
       if (active) {
         uint32_t rays = 0;

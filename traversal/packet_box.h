@@ -93,6 +93,24 @@ struct NodeTester {
       }
     }
   }
+  // Calls f with the group test as a callable of its own type for each case, so that a loop over
+  // groups is compiled once per case: in the hoisted case the six plane vectors are then locals of
+  // the loop (g++ 12 otherwise copies them between stack slots at every node).
+  template <class F>
+  [[gnu::always_inline]] void with_test(F&& f) const {
+    if (pre) {
+      const __m256 n0 = xn[0], n1 = xn[1], n2 = xn[2], f0 = xf[0], f1 = xf[1], f2 = xf[2];
+      const RayGroup* rg = p.rg;
+      f([=](uint32_t g) {
+        const RayGroup& G = rg[g];
+        const __m256 an[3] = {n0, n1, n2}, af[3] = {f0, f1, f2};
+        __m256 tn;
+        return uint32_t(_mm256_movemask_ps(slab<8, true>(an, af, G.inv, G.inv, G.tmin, G.tfar, tn)));
+      });
+    } else {
+      f([this](uint32_t g) { return group_box<kCommon>(p, g, n); });
+    }
+  }
   uint32_t operator()(uint32_t g) const {
     if (!pre) return group_box<kCommon>(p, g, n);
     const RayGroup& G = p.rg[g];
