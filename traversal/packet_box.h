@@ -18,14 +18,13 @@ namespace tb::packet {
 // The kernel library's slab test (kernels.h slab, as box_entry: padded far distance), 8 rays
 // against one box. Near/far planes are selected per lane by the sign bit of the reciprocal
 // direction (blendv reads the sign bit, so -0 -> -inf selects like the scalar test). Returns the
-// lane mask of hits.
-[[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const BVHNode& n) {
+// lane mask of hits. The node's planes come broadcast (NodeTester does it once per node rather than
+// once per group: sponza bounce:2, bvh_partition 219.4 M -> 208.4 M instructions, OLD 205.8 M).
+[[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const __m256 lo[3], const __m256 hi[3]) {
   using S = simd::V<8>;
-  const float* lo = &n.lo.x;
-  const float* hi = &n.hi.x;
   __m256 xn[3], xf[3];
   for (int a = 0; a < 3; ++a) {
-    const __m256 l = _mm256_sub_ps(_mm256_set1_ps(lo[a]), g.o[a]), h = _mm256_sub_ps(_mm256_set1_ps(hi[a]), g.o[a]);
+    const __m256 l = _mm256_sub_ps(lo[a], g.o[a]), h = _mm256_sub_ps(hi[a], g.o[a]);
     xn[a] = S::blendv(l, h, g.inv[a]);
     xf[a] = S::blendv(h, l, g.inv[a]);
   }
@@ -39,10 +38,10 @@ namespace tb::packet {
 // group, and with a common origin the plane offsets are scalars. Every lane computes the very
 // same values as in box_mask: (plane - o) * inv, padded far, NaN-first min/max.
 template <bool kCommon>
-inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n) {
+inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const __m256 lo8[3], const __m256 hi8[3]) {
   const int s = p.gsign[g];
   const RayGroup& G = p.rg[g];
-  if (s < 0) return box_mask(G, n);
+  if (s < 0) return box_mask(G, lo8, hi8);
   const float* lo = &n.lo.x;
   const float* hi = &n.hi.x;
   __m256 xn[3], xf[3];
@@ -78,7 +77,8 @@ struct NodeTester {
   const Packet& p;
   const BVHNode& n;
   bool pre = false;
-  __m256 xn[3], xf[3];
+  __m256 xn[3], xf[3];  // hoisted case: plane offsets (far padded)
+  __m256 lo8[3], hi8[3];  // otherwise: the node's planes broadcast once per node, for box_mask
   NodeTester(const Packet& pk, const BVHNode& nd) : p(pk), n(nd) {
     if constexpr (kCommon) {
       if (p.psign >= 0) {
@@ -92,6 +92,8 @@ struct NodeTester {
         }
       }
     }
+    if (!pre)
+      for (int a = 0; a < 3; ++a) lo8[a] = _mm256_set1_ps((&n.lo.x)[a]), hi8[a] = _mm256_set1_ps((&n.hi.x)[a]);
   }
   // Calls f with the group test as a callable of its own type for each case, so that a loop over
   // groups is compiled once per case: in the hoisted case the six plane vectors are then locals of
@@ -108,11 +110,15 @@ struct NodeTester {
         return uint32_t(_mm256_movemask_ps(slab<8, true>(an, af, G.inv, G.inv, G.tmin, G.tfar, tn)));
       });
     } else {
-      f([this](uint32_t g) { return group_box<kCommon>(p, g, n); });
+      const __m256 l0 = lo8[0], l1 = lo8[1], l2 = lo8[2], h0 = hi8[0], h1 = hi8[1], h2 = hi8[2];
+      f([=, this](uint32_t g) {
+        const __m256 L[3] = {l0, l1, l2}, H[3] = {h0, h1, h2};
+        return group_box<kCommon>(p, g, n, L, H);
+      });
     }
   }
   uint32_t operator()(uint32_t g) const {
-    if (!pre) return group_box<kCommon>(p, g, n);
+    if (!pre) return group_box<kCommon>(p, g, n, lo8, hi8);
     const RayGroup& G = p.rg[g];
     __m256 tn;
     return uint32_t(_mm256_movemask_ps(slab<8, true>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
