@@ -31,8 +31,8 @@
 namespace tb::packet {
 
 // Group g of the packet against the node `box` was set up for; the probe sees the group's read.
-template <bool kCommon, class P>
-[[gnu::always_inline]] inline uint32_t test_group(const Packet& pk, uint32_t g, const NodeTester<kCommon>& box,
+template <bool kCommon, class P, bool kHoist>
+[[gnu::always_inline]] inline uint32_t test_group(const Packet& pk, uint32_t g, const NodeTester<kCommon, kHoist>& box,
                                                   P& probe) {
   probe.read(&pk.rg[g], sizeof(RayGroup));
   return box(g);

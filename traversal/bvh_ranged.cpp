@@ -64,7 +64,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
   // Alg. 2.6 FindFirst, over groups: the first ray of [first, last] that hits n, or kNone.
   // `found_mask` receives the hit lanes of the group holding that ray.
   template <bool kCommon, class P>
-  [[gnu::always_inline]] static uint32_t find_first(Packet& pk, const BVHNode& n, const NodeTester<kCommon>& box, uint32_t first,
+  [[gnu::always_inline]] static uint32_t find_first(Packet& pk, const BVHNode& n, const NodeTester<kCommon, true>& box, uint32_t first,
                              uint32_t last, uint32_t& found_mask, P& probe) {
     const uint32_t g0 = first / kW, g1 = last / kW;
     uint32_t m = test_group<kCommon>(pk, g0, box, probe) & range_mask(g0, first, last);
@@ -82,7 +82,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
   // The last ray of [first, last] that hits n, scanning from the back (Overbeck et al. 2008 keep
   // both ends of the range); `first` is known to hit, with `first_mask` its group's lanes.
   template <bool kCommon, class P>
-  static uint32_t find_last(const Packet& pk, const NodeTester<kCommon>& box, uint32_t first, uint32_t last,
+  static uint32_t find_last(const Packet& pk, const NodeTester<kCommon, true>& box, uint32_t first, uint32_t last,
                             uint32_t first_mask, P& probe) {
     const uint32_t g0 = first / kW;
     for (uint32_t g = last / kW; g > g0; --g) {
@@ -97,7 +97,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
   // rays that miss it). Instrumented path only; a NullProbe, because this count is no access the
   // scheme makes.
   template <bool kCommon>
-  static uint32_t rays_hitting(const Packet& pk, const NodeTester<kCommon>& box, uint32_t f, uint32_t l) {
+  static uint32_t rays_hitting(const Packet& pk, const NodeTester<kCommon, true>& box, uint32_t f, uint32_t l) {
     NullProbe none;
     uint32_t n = 0;
     for (uint32_t g = f / kW; g <= l / kW; ++g) n += std::popcount(test_group<kCommon>(pk, g, box, none) & range_mask(g, f, l));
@@ -111,7 +111,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
     for (;;) {
       const BVHNode& nd = nodes[node];
       uint32_t fmask = 0;
-      const NodeTester<kCommon> box(pk, nd);
+      const NodeTester<kCommon, true> box(pk, nd);
       const uint32_t f = find_first<kCommon>(pk, nd, box, first, last, fmask, probe);
       if (f != kNone) {
         const uint32_t l = track_last_ ? find_last<kCommon>(pk, box, f, last, fmask, probe) : last;
@@ -138,7 +138,7 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
   }
 
   template <TriKernel K, bool kCommon, class P>
-  void intersect_leaf(Packet& pk, const BVHNode& nd, const NodeTester<kCommon>& box, uint32_t f, uint32_t l,
+  void intersect_leaf(Packet& pk, const BVHNode& nd, const NodeTester<kCommon, true>& box, uint32_t f, uint32_t l,
                       uint32_t fmask, P& probe) const {
     const TriangleSet& ts = *data_.tris;
     const uint32_t g0 = f / kW, g1 = l / kW;

@@ -9,6 +9,8 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <tuple>
+#include <type_traits>
 
 #include "traversal/packet.h"
 
@@ -18,8 +20,9 @@ namespace tb::packet {
 // The kernel library's slab test (kernels.h slab, as box_entry: padded far distance), 8 rays
 // against one box. Near/far planes are selected per lane by the sign bit of the reciprocal
 // direction (blendv reads the sign bit, so -0 -> -inf selects like the scalar test). Returns the
-// lane mask of hits. The node's planes come broadcast (NodeTester does it once per node rather than
-// once per group: sponza bounce:2, bvh_partition 219.4 M -> 208.4 M instructions, OLD 205.8 M).
+// lane mask of hits. The node's planes come broadcast (NodeTester::with_test does it once per node
+// rather than once per group: sponza bounce:2, bvh_partition 219.4 M -> 208.4 M instructions, OLD
+// 205.8 M).
 [[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const __m256 lo[3], const __m256 hi[3]) {
   using S = simd::V<8>;
   __m256 xn[3], xf[3];
@@ -72,13 +75,17 @@ inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const _
 // a ray really enters, so hits are unchanged (tests/test_packets.cpp compares them with the
 // single-ray schemes). Callgrind, sponza primary 128x128: bvh_partition 36.67 M -> see
 // docs/PERFORMANCE.md, session 7.
-template <bool kCommon>
+template <bool kCommon, bool kHoistPlanes = false>
 struct NodeTester {
   const Packet& p;
   const BVHNode& n;
   bool pre = false;
   __m256 xn[3], xf[3];  // hoisted case: plane offsets (far padded)
-  __m256 lo8[3], hi8[3];  // otherwise: the node's planes broadcast once per node, for box_mask
+  // kHoistPlanes: otherwise the node's planes broadcast once per node for box_mask (bvh_ranged,
+  // which tests many groups per tester: sponza bounce:2 270.9 M -> 260.0 M instructions, OLD
+  // 261.6 M). Not by default: bvh_masked builds two testers per node and tests few groups with
+  // each (+19% on the same rays with the broadcasts in every tester).
+  [[no_unique_address]] std::conditional_t<kHoistPlanes, std::array<__m256, 6>, std::tuple<>> planes;  // filled only when !pre
   NodeTester(const Packet& pk, const BVHNode& nd) : p(pk), n(nd) {
     if constexpr (kCommon) {
       if (p.psign >= 0) {
@@ -92,8 +99,9 @@ struct NodeTester {
         }
       }
     }
-    if (!pre)
-      for (int a = 0; a < 3; ++a) lo8[a] = _mm256_set1_ps((&n.lo.x)[a]), hi8[a] = _mm256_set1_ps((&n.hi.x)[a]);
+    if constexpr (kHoistPlanes)
+      if (!pre)
+        for (int a = 0; a < 3; ++a) planes[a] = _mm256_set1_ps((&n.lo.x)[a]), planes[3 + a] = _mm256_set1_ps((&n.hi.x)[a]);
   }
   // Calls f with the group test as a callable of its own type for each case, so that a loop over
   // groups is compiled once per case: in the hoisted case the six plane vectors are then locals of
@@ -110,7 +118,12 @@ struct NodeTester {
         return uint32_t(_mm256_movemask_ps(slab<8, true>(an, af, G.inv, G.inv, G.tmin, G.tfar, tn)));
       });
     } else {
-      const __m256 l0 = lo8[0], l1 = lo8[1], l2 = lo8[2], h0 = hi8[0], h1 = hi8[1], h2 = hi8[2];
+      // The node's planes broadcast once for the whole loop (box_mask, the mixed-sign path of
+      // bounce groups), not once per group. Only here: a NodeTester member filled in the
+      // constructor cost bvh_masked, which builds two testers per node, +19% instructions on
+      // sponza bounce:2 (222.3 M -> 263.9 M).
+      const __m256 l0 = _mm256_set1_ps(n.lo.x), l1 = _mm256_set1_ps(n.lo.y), l2 = _mm256_set1_ps(n.lo.z);
+      const __m256 h0 = _mm256_set1_ps(n.hi.x), h1 = _mm256_set1_ps(n.hi.y), h2 = _mm256_set1_ps(n.hi.z);
       f([=, this](uint32_t g) {
         const __m256 L[3] = {l0, l1, l2}, H[3] = {h0, h1, h2};
         return group_box<kCommon>(p, g, n, L, H);
@@ -118,7 +131,12 @@ struct NodeTester {
     }
   }
   uint32_t operator()(uint32_t g) const {
-    if (!pre) return group_box<kCommon>(p, g, n, lo8, hi8);
+    if (!pre) {
+      if constexpr (kHoistPlanes) return group_box<kCommon>(p, g, n, planes.data(), planes.data() + 3);
+      const __m256 L[3] = {_mm256_set1_ps(n.lo.x), _mm256_set1_ps(n.lo.y), _mm256_set1_ps(n.lo.z)};
+      const __m256 H[3] = {_mm256_set1_ps(n.hi.x), _mm256_set1_ps(n.hi.y), _mm256_set1_ps(n.hi.z)};
+      return group_box<kCommon>(p, g, n, L, H);
+    }
     const RayGroup& G = p.rg[g];
     __m256 tn;
     return uint32_t(_mm256_movemask_ps(slab<8, true>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
