@@ -85,7 +85,10 @@ struct NodeTester {
   // which tests many groups per tester: sponza bounce:2 270.9 M -> 260.0 M instructions, OLD
   // 261.6 M). Not by default: bvh_masked builds two testers per node and tests few groups with
   // each (+19% on the same rays with the broadcasts in every tester).
-  [[no_unique_address]] std::conditional_t<kHoistPlanes, std::array<__m256, 6>, std::tuple<>> planes;  // filled only when !pre
+  struct Planes {
+    __m256 v[6];  // lo x, y, z, hi x, y, z
+  };
+  [[no_unique_address]] std::conditional_t<kHoistPlanes, Planes, std::tuple<>> planes;  // filled only when !pre
   NodeTester(const Packet& pk, const BVHNode& nd) : p(pk), n(nd) {
     if constexpr (kCommon) {
       if (p.psign >= 0) {
@@ -101,7 +104,7 @@ struct NodeTester {
     }
     if constexpr (kHoistPlanes)
       if (!pre)
-        for (int a = 0; a < 3; ++a) planes[a] = _mm256_set1_ps((&n.lo.x)[a]), planes[3 + a] = _mm256_set1_ps((&n.hi.x)[a]);
+        for (int a = 0; a < 3; ++a) planes.v[a] = _mm256_set1_ps((&n.lo.x)[a]), planes.v[3 + a] = _mm256_set1_ps((&n.hi.x)[a]);
   }
   // Calls f with the group test as a callable of its own type for each case, so that a loop over
   // groups is compiled once per case: in the hoisted case the six plane vectors are then locals of
@@ -132,7 +135,7 @@ struct NodeTester {
   }
   uint32_t operator()(uint32_t g) const {
     if (!pre) {
-      if constexpr (kHoistPlanes) return group_box<kCommon>(p, g, n, planes.data(), planes.data() + 3);
+      if constexpr (kHoistPlanes) return group_box<kCommon>(p, g, n, planes.v, planes.v + 3);
       const __m256 L[3] = {_mm256_set1_ps(n.lo.x), _mm256_set1_ps(n.lo.y), _mm256_set1_ps(n.lo.z)};
       const __m256 H[3] = {_mm256_set1_ps(n.hi.x), _mm256_set1_ps(n.hi.y), _mm256_set1_ps(n.hi.z)};
       return group_box<kCommon>(p, g, n, L, H);
