@@ -74,16 +74,6 @@ inline __m256i sort8(__m256i k) {
 
 }  // namespace mbvh_simd
 
-// Per-ray constants of the N-wide box test: origin, reciprocal direction, the reciprocal padded
-// for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
-// reciprocal, pad, multiply — is the same as box_entry's, so the same bound holds), and the rows
-// of the near and far planes per axis (sign-selected slabs, Williams et al. 2005).
-// The origin is stored NEGATED: box_test computes plane + (-origin), which is plane - origin
-// exactly (IEEE negation is exact, and x + (-y) is the same operation as x - y, signed zeros
-// included), so the test's values are bit-identical to slab's. The point is the operand order:
-// addition commutes, so the node row's load folds into the vaddps as its memory operand — one
-// instruction per plane, six per node test fewer than a load and a vsubps (callgrind, sponza
-// primary 128x128, mbvh4_single: docs/PERFORMANCE.md, session 7).
 // Float offsets into MBVHNode<N>::box of the near (0..2) and far (3..5) plane row of each axis,
 // by ray octant (bit a set: direction a negative, entered through hi). A per-ray pointer into this
 // table replaces six per-ray offsets: g++ 12 kept those in stack slots anyway, loaded at every
@@ -101,6 +91,16 @@ inline constexpr std::array<std::array<uint32_t, 6>, 8> kPlaneRows = [] {
   return t;
 }();
 
+// Per-ray constants of the N-wide box test: origin, reciprocal direction, the reciprocal padded
+// for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
+// reciprocal, pad, multiply — is the same as box_entry's, so the same bound holds), and the rows
+// of the near and far planes per axis (sign-selected slabs, Williams et al. 2005).
+// The origin is stored NEGATED: box_test computes plane + (-origin), which is plane - origin
+// exactly (IEEE negation is exact, and x + (-y) is the same operation as x - y, signed zeros
+// included), so the test's values are bit-identical to slab's. The point is the operand order:
+// addition commutes, so the node row's load folds into the vaddps as its memory operand — one
+// instruction per plane, six per node test fewer than a load and a vsubps (callgrind, sponza
+// primary 128x128, mbvh4_single: docs/PERFORMANCE.md, session 7).
 template <int N>
 struct NodeRay {
   using f = typename simd::V<N>::f;

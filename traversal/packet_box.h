@@ -68,13 +68,12 @@ inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const _
 // the near/far plane offsets (plane - org) are the same scalars for every group, so they are
 // broadcast once per node. The far offset is also padded once per node, (plane - org) * kFarPad,
 // and each group test is slab<8, kPadRcp = true> on it: 6 multiplies (instead of 9), 6 min/max
-// and a compare. The far distance
-// is then ((pf - o) * pad) * inv instead of ((pf - o) * inv) * pad: the same roundings (subtract,
-// reciprocal, pad, multiply), so Ize's bound holds as it does for the MBVH layouts' inv * pad
-// (kernels.h slab); the values may differ from box_mask's in the last bit, never in which boxes
-// a ray really enters, so hits are unchanged (tests/test_packets.cpp compares them with the
-// single-ray schemes). Callgrind, sponza primary 128x128: bvh_partition 36.67 M -> see
-// docs/PERFORMANCE.md, session 7.
+// and a compare. The far distance is then ((pf - o) * pad) * inv instead of ((pf - o) * inv) *
+// pad: the same roundings (subtract, reciprocal, pad, multiply), so Ize's bound holds as it does
+// for the MBVH layouts' inv * pad (kernels.h slab); the values may differ from box_mask's in the
+// last bit, never in which boxes a ray really enters, so hits are unchanged (tests/test_packets.cpp
+// compares them with the single-ray schemes). Callgrind, sponza primary 128x128: bvh_partition
+// 36.67 M -> 36.02 M (docs/PERFORMANCE.md, session 7).
 template <bool kCommon, bool kHoistPlanes = false>
 struct NodeTester {
   const Packet& p;
