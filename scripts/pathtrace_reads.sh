@@ -15,7 +15,8 @@
 #     SCENE    default ../shared/scenes/conference.obj
 #     OUT.csv  default results/<scene>/pathtrace_reads.csv
 #   SIZE=512 (image side), SPP=1, METHOD=Ref in the environment; TB=build/travbench (native, for the
-#   ray files and the cache simulator), TB_VG=<a non-native travbench> (default: builds build-valgrind/).
+#   ray files and the cache simulator), TB_VG=<a non-native travbench> (default: builds build-valgrind/),
+#   STREAMS=512,1024 (extra mbvh_rs rows on the pathtrace set at these stream sizes, simulator only).
 #
 # Per (ray set, scheme) row: rays and rays_per_pixel; loads/stores_per_ray: callgrind's Dr / Dw
 # (--cache-sim=yes) inside one trace of the whole file (`travbench trace` without --csv: one
@@ -78,10 +79,18 @@ with open(out, "wb") as f:
 PY
 rm -f "${parts[@]}"
 
-sets=(pathtrace bounce0-4)
 # scheme|parameters: as `table cache` and scripts/loads_per_ray.sh run them (the thesis' 4-wide layout).
 cells=("mbvh_rs|--param width=4" "raygrid|--param width=4 --param queue=256")
-measure() {  # SET CELL
+simulate() {  # SET TAG SCHEME PARAMS...: the cache simulator in 64-byte lines and in 4-byte words
+  local set=$1 tag=$2 s=$3
+  shift 3
+  $TB trace --scene "$SCENE" --scheme "$s" "$@" --rays "$work/$set.rays" --threads 1 --reps 1 --cache \
+    --csv "$work/$tag.lines.csv" >/dev/null 2>>"$work/$tag.log" || { cat "$work/$tag.log" >&2; return 1; }
+  $TB trace --scene "$SCENE" --scheme "$s" "$@" --rays "$work/$set.rays" --threads 1 --reps 1 --cache \
+    --cache-config l1=32K:8:4,l2=256K:8:4,l3=2M:16:4 --csv "$work/$tag.words.csv" >/dev/null 2>>"$work/$tag.log" ||
+    { cat "$work/$tag.log" >&2; return 1; }
+}
+measure() {  # SET CELL: callgrind, then the simulator
   local set=$1 s=${2%%|*} p=${2#*|} tag="$1.${2%%|*}"
   echo "pathtrace_reads: $s on $set under callgrind" >&2
   # shellcheck disable=SC2086
@@ -91,23 +100,28 @@ measure() {  # SET CELL
     { cat "$work/$tag.log" >&2; return 1; }
   rm -f "$work/$tag.hits"
   # shellcheck disable=SC2086
-  $TB trace --scene "$SCENE" --scheme "$s" $p --rays "$work/$set.rays" --threads 1 --reps 1 --cache \
-    --csv "$work/$tag.lines.csv" >/dev/null 2>>"$work/$tag.log" || { cat "$work/$tag.log" >&2; return 1; }
-  # shellcheck disable=SC2086
-  $TB trace --scene "$SCENE" --scheme "$s" $p --rays "$work/$set.rays" --threads 1 --reps 1 --cache \
-    --cache-config l1=32K:8:4,l2=256K:8:4,l3=2M:16:4 --csv "$work/$tag.words.csv" >/dev/null 2>>"$work/$tag.log" ||
-    { cat "$work/$tag.log" >&2; return 1; }
+  simulate "$set" "$tag" "$s" $p
 }
 # Two at a time (the machine has 2 cores; each valgrind process is single-threaded).
-for set in "${sets[@]}"; do
+jobs=()
+for set in pathtrace bounce0-4; do
   pids=()
-  for cell in "${cells[@]}"; do measure "$set" "$cell" & pids+=($!); done
+  for cell in "${cells[@]}"; do measure "$set" "$cell" & pids+=($!); jobs+=("$set|$cell"); done
   for pid in "${pids[@]}"; do wait "$pid" || { echo "pathtrace_reads: a cell failed" >&2; exit 1; }; done
 done
+# MBVH/RS's stream size (most rays traced together), over the thesis' "optimal stream size for the
+# MBVH/RS algorithm (256-1024)" (§5.3): the simulator only (no callgrind columns). It moves the reads
+# that miss L1, not the reads.
+IFS=, read -r -a streams <<<"${STREAMS:-512,1024}"
+for n in "${streams[@]}"; do
+  echo "pathtrace_reads: mbvh_rs stream=$n on pathtrace (simulator)" >&2
+  simulate pathtrace "pathtrace.mbvh_rs.stream$n" mbvh_rs --param width=4 --param stream="$n"
+  jobs+=("pathtrace|mbvh_rs|--param width=4 --param stream=$n")
+done
 mkdir -p "$(dirname "$OUT")"
-/usr/bin/python3 - "$work" "$OUT" "$SIZE" "$METHOD" "$SPP" "${cells[@]}" <<'PY'
-import csv, re, sys
-work, out, size, method, spp, cells = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5], sys.argv[6:]
+/usr/bin/python3 - "$work" "$OUT" "$SIZE" "$METHOD" "$SPP" "${jobs[@]}" <<'PY'
+import csv, os, re, sys
+work, out, size, method, spp, jobs = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5], sys.argv[6:]
 pixels = size * size
 seg = list(csv.DictReader(open(f"{work}/pathtrace.segments.csv")))
 ext = sum(int(r["rays"]) for r in seg if r["kind"] == "pathtrace:ext")
@@ -118,41 +132,44 @@ def row(path):
     return next(csv.DictReader(l for l in open(path) if not l.startswith("#")))
 def reads(r):
     return sum(float(r[k]) for k in ("l1_read_hit_m", "l2_read_hit_m", "l3_read_hit_m", "mem_read_m")) * 1e6
+def cg(event, n, extra=0, digits=1):  # a callgrind count per ray or pixel; empty without a callgrind run
+    return f"{(ev[event] + extra) / n:.{digits}f}" if event in ev else ""
 def writes(r):
     return sum(float(r[k]) for k in ("l1_write_hit_m", "l2_write_hit_m", "l3_write_hit_m", "mem_write_m")) * 1e6
 rows = []
-for st in ("pathtrace", "bounce0-4"):
-    for cell in cells:
-        s = cell.split("|")[0]
-        tag = f"{st}.{s}"
+for job in jobs:
+    st, s, params = job.split("|")
+    stream = re.search(r"stream=(\d+)", params)
+    tag = f"{st}.{s}" + (f".stream{stream.group(1)}" if stream else "")
+    ev = {}
+    if os.path.exists(f"{work}/{tag}.cg"):
         text = open(f"{work}/{tag}.cg").read()
         events = re.search(r"^events: (.*)$", text, re.M).group(1).split()
         m = re.search(r"^totals: (.*)$", text, re.M) or re.search(r"^summary: (.*)$", text, re.M)
         ev = dict(zip(events, [int(x) for x in m.group(1).split()]))
-        lines, words = row(f"{work}/{tag}.lines.csv"), row(f"{work}/{tag}.words.csv")
-        rays = int(lines["rays"])
-        rpp = rays / pixels
-        d = {"scene": lines["scene"], "ray_set": st,
-             "description": (f"{method} path tracer, {spp} spp: extension + shadow rays" if st == "pathtrace"
-                             else "primary + bounce:1..4, one image each"),
-             "scheme": s, "params": cell.split("|")[1].replace("--param ", ""), "image": f"{size}x{size}",
-             "rays": rays, "rays_per_pixel": f"{rpp:.4f}",
-             "ext_rays": ext if st == "pathtrace" else "", "shadow_rays": shadow if st == "pathtrace" else "",
-             "ext_rays_by_segment": survivors if st == "pathtrace" else "",
-             "instructions_per_ray": f"{ev['Ir'] / rays:.1f}", "loads_per_ray": f"{ev['Dr'] / rays:.1f}",
-             "stores_per_ray": f"{ev['Dw'] / rays:.1f}",
-             "read_lines_per_ray": f"{reads(lines) / rays:.2f}", "write_lines_per_ray": f"{writes(lines) / rays:.2f}",
-             "read_words_per_ray": f"{reads(words) / rays:.2f}",
-             "l1_read_hit_m": lines["l1_read_hit_m"], "l1_write_hit_m": lines["l1_write_hit_m"],
-             "l2_read_hit_m": lines["l2_read_hit_m"], "l3_read_hit_m": lines["l3_read_hit_m"],
-             "mem_read_m": lines["mem_read_m"],
-             "d1_misses_per_ray": f"{(ev['D1mr'] + ev['D1mw']) / rays:.2f}",
-             "loads_per_pixel": f"{ev['Dr'] / pixels:.1f}", "stores_per_pixel": f"{ev['Dw'] / pixels:.1f}",
-             "read_lines_per_pixel": f"{reads(lines) / pixels:.1f}", "read_words_per_pixel": f"{reads(words) / pixels:.1f}",
-             # Reads that miss the simulated L1 (its L2 + L3 hits + memory reads), per pixel: a line-level
-             # count, whatever unit the accesses are counted in.
-             "l1_read_misses_per_pixel": f"{sum(float(lines[k]) for k in ('l2_read_hit_m', 'l3_read_hit_m', 'mem_read_m')) * 1e6 / pixels:.1f}"}
-        rows.append(d)
+    lines, words = row(f"{work}/{tag}.lines.csv"), row(f"{work}/{tag}.words.csv")
+    rays = int(lines["rays"])
+    rpp = rays / pixels
+    d = {"scene": lines["scene"], "ray_set": st,
+         "description": (f"{method} path tracer, {spp} spp: extension + shadow rays" if st == "pathtrace"
+                         else "primary + bounce:1..4, one image each"),
+         "scheme": s, "params": params.replace("--param ", ""), "image": f"{size}x{size}",
+         "rays": rays, "rays_per_pixel": f"{rpp:.4f}",
+         "ext_rays": ext if st == "pathtrace" else "", "shadow_rays": shadow if st == "pathtrace" else "",
+         "ext_rays_by_segment": survivors if st == "pathtrace" else "",
+         "instructions_per_ray": cg("Ir", rays), "loads_per_ray": cg("Dr", rays), "stores_per_ray": cg("Dw", rays),
+         "read_lines_per_ray": f"{reads(lines) / rays:.2f}", "write_lines_per_ray": f"{writes(lines) / rays:.2f}",
+         "read_words_per_ray": f"{reads(words) / rays:.2f}",
+         "l1_read_hit_m": lines["l1_read_hit_m"], "l1_write_hit_m": lines["l1_write_hit_m"],
+         "l2_read_hit_m": lines["l2_read_hit_m"], "l3_read_hit_m": lines["l3_read_hit_m"],
+         "mem_read_m": lines["mem_read_m"],
+         "d1_misses_per_ray": cg("D1mr", rays, ev.get("D1mw", 0), 2),
+         "loads_per_pixel": cg("Dr", pixels), "stores_per_pixel": cg("Dw", pixels),
+         "read_lines_per_pixel": f"{reads(lines) / pixels:.1f}", "read_words_per_pixel": f"{reads(words) / pixels:.1f}",
+         # Reads that miss the simulated L1 (its L2 + L3 hits + memory reads), per pixel: a line-level
+         # count, whatever unit the accesses are counted in.
+         "l1_read_misses_per_pixel": f"{sum(float(lines[k]) for k in ('l2_read_hit_m', 'l3_read_hit_m', 'mem_read_m')) * 1e6 / pixels:.1f}"}
+    rows.append(d)
 with open(out, "w", newline="") as f:
     w = csv.DictWriter(f, fieldnames=list(rows[0])); w.writeheader(); w.writerows(rows)
 print("\n".join(f"{r['ray_set']:<10} {r['scheme']:<8} rays/pixel {r['rays_per_pixel']:>7}  per pixel: loads "
