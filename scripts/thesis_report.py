@@ -974,7 +974,7 @@ def pathtraced_frame(R, t11, t_reads, rays):
         if lab not in t_reads or not r["params"].startswith("width=4"):
             continue
         tr, loads = t_reads[lab], num(r["loads_per_pixel"])
-        name = r["scheme"] + "".join(f" {p}" for p in r["params"].split(";") if p.startswith("stream="))
+        name = r["scheme"] + "".join(f" {p}" for p in re.split(r"[ ;]", r["params"]) if p.startswith("stream="))
         body.append([r["ray_set"], name, f(num(r["rays_per_pixel"])), f(loads, 0),
                      f(num(r["read_words_per_pixel"]), 0), f(num(r["read_lines_per_pixel"]), 0),
                      f(num(r["l1_read_misses_per_pixel"]), 1), f(num(r["stores_per_pixel"]), 0),
