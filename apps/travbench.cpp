@@ -19,6 +19,7 @@
 #include "harness/compare.h"
 #include "harness/experiment.h"
 #include "harness/image.h"
+#include "harness/pathtrace.h"
 #include "harness/sweep.h"
 #include "harness/tables.h"
 #include "harness/trace_runner.h"
@@ -200,11 +201,19 @@ int main(int argc, char** argv) {
   table->add_flag("--resume", resume,
                   "keep the cells --csv holds from an interrupted table of the same settings and measure only the rest");
 
-  std::string rays_out, workload_arg;
+  std::string rays_out, workload_arg, pt_method;
+  uint32_t pt_spp = 1;
   auto* rays = app.add_subcommand("rays", "Generate a workload and write it as a ray file");
   add_scene(rays);
   add_image(rays);
-  rays->add_option("--workload", workload_arg, "workload name")->required()->check(kWorkload);
+  auto* rays_workload = rays->add_option("--workload", workload_arg, "workload name")->check(kWorkload);
+  // Every ray one path-traced frame traces (harness/pathtrace.h), so a scheme, the cache simulator
+  // or callgrind can replay a frame (scripts/pathtrace_reads.sh); the frame is rendered with the
+  // reference traverser, and stdout gets the rays per iteration and kind as CSV.
+  rays->add_option("--pathtrace", pt_method, "instead of --workload: one frame of this path tracer (Ref, PR, DPT, ...)")
+      ->check(checked_by("METHOD", [](const std::string& v) { parse_pt_method(v); }))
+      ->excludes(rays_workload);
+  rays->add_option("--spp", pt_spp, "samples per pixel of --pathtrace")->check(CLI::Range(1, 4096));
   rays->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
   rays->add_option("--out", rays_out, "ray file to write")->required()->check(kOutputFile);
 
@@ -216,6 +225,9 @@ int main(int argc, char** argv) {
   trace->add_option("--scheme", scheme_arg, "scheme name")->required()->check(kScheme);
   trace->add_option("--rays", rays_in, "ray file to read")->required();
   trace->add_option("--hits", hits_out, "hit file to write")->check(kOutputFile);
+  trace->add_flag("--cache", ro.cache, "with --csv: add run's simulated cache columns (one instrumented trace)");
+  trace->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
+  trace->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru")->check(kPolicy);
 
   ImageOptions io;
   auto* image = app.add_subcommand("image", "Per-pixel heat map of one scheme's traversal cost on a workload -> PNG");
@@ -286,8 +298,10 @@ int main(int argc, char** argv) {
       io.scheme_config = ro.scheme_config;
       check_image_options(io);
     }
+    if (*rays && workload_arg.empty() && pt_method.empty()) throw InputError("rays: give --workload or --pathtrace");
     if (*trace) {
       check_run_params({scheme_arg}, ro.scheme_config);
+      if (ro.cache && csv_path.empty()) throw InputError("trace: --cache needs --csv (its columns go there)");
       if (hits_out.empty() && csv_path.empty())
         throw InputError("trace: nothing to write: give --hits FILE and/or --csv FILE");
     }
@@ -325,6 +339,22 @@ int main(int argc, char** argv) {
     if (*image) {
       io.view = ro.view;
       run_image(bench, io, bench.scene().name);
+      return 0;
+    }
+    if (*rays && !pt_method.empty()) {
+      PtOptions o;
+      o.width = ro.width, o.height = ro.height, o.view = ro.view, o.spp = pt_spp, o.seed = ro.seed;
+      std::vector<RayBatch> traced;
+      o.traced = &traced;
+      render_pathtrace(bench.scene(), bench.reference(), scene_lighting(bench.scene()), parse_pt_method(pt_method), o);
+      RayBatch all;
+      std::printf("iteration,kind,rays,packets\n");
+      for (const RayBatch& b : traced) {
+        std::printf("%u,%s,%zu,%u\n", b.depth, b.workload.c_str(), b.size(), b.num_packets());
+        for (uint32_t p = 0; p < b.num_packets(); ++p) all.packet_begin.push_back(all.packet_begin.back() + b.packet_rays(p));
+        all.rays.insert(all.rays.end(), b.rays.begin(), b.rays.end());
+      }
+      write_rays(rays_out, all);
       return 0;
     }
     if (*rays) {

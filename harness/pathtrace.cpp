@@ -155,7 +155,7 @@ class Wavefront {
     stats_.ext_rays += ext.size();
     stats_.ext_packets += ext.num_packets();
     std::vector<Hit> hits(ext.size());
-    trace(ext, hits);
+    trace(ext, hits, "pathtrace:ext");
 
     // Shadow rays keep the packet of the extension ray that made them.
     shadow_.rays.clear();
@@ -172,7 +172,7 @@ class Wavefront {
     stats_.shadow_rays += shadow_.size();
     stats_.shadow_packets += shadow_.num_packets();
     std::vector<Hit> occ(shadow_.size());
-    trace(shadow_, occ);
+    trace(shadow_, occ, "pathtrace:shadow");
     for (size_t i = 0; i < occ.size(); ++i)
       if (!occ[i].hit()) add(shadow_pixel_[i], shadow_contrib_[i], shadow_depth_[i]);
   }
@@ -185,7 +185,12 @@ class Wavefront {
   }
 
  private:
-  void trace(const RayBatch& b, std::span<Hit> hits) {
+  void trace(const RayBatch& b, std::span<Hit> hits, const char* kind) {
+    if (opt_.traced) {
+      opt_.traced->push_back(b);
+      opt_.traced->back().workload = kind;
+      opt_.traced->back().depth = uint32_t(stats_.iterations - 1);
+    }
     const auto t0 = std::chrono::steady_clock::now();
     tracer_.trace(b, PacketRange::all(b), hits);
     stats_.trace_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -63,6 +63,12 @@ struct PtOptions {
   // makes is an independent estimate (the converged image's two halves have salts of their own).
   std::string salt;
   uint32_t ris_per_light = 2;  // RIS candidates per light (§6.4.2: "two points on each light source")
+  // When set, receives a copy of every batch handed to Traverser::trace, in trace order (each
+  // iteration's extension rays, then its shadow rays), packets kept; workload "pathtrace:ext" or
+  // "pathtrace:shadow", depth = the iteration (for Ref/RIS/DPT at 1 spp: the path segment). It lets
+  // a frame's rays be replayed through any scheme, the cache simulator or callgrind
+  // (`travbench rays --pathtrace`, scripts/pathtrace_reads.sh: the ray count behind thesis Table 11).
+  std::vector<RayBatch>* traced = nullptr;
 };
 
 // Counters of one rendering. Utilisation (docs/PATHTRACE.md):

@@ -109,6 +109,41 @@ TEST(CLI, TraceTimesARayFileIntoTheRunColumns) {
   std::filesystem::remove_all(dir);
 }
 
+// `rays --pathtrace` writes one path-traced frame's rays (stdout: rays per iteration and kind), and
+// `trace --cache --csv` replays them through the cache simulator (scripts/pathtrace_reads.sh).
+TEST(CLI, PathTracedFrameRaysReplayThroughTheCacheSimulator) {
+  const auto dir = test::temp_dir("cli_pt_rays");
+  const std::string rays = (dir / "pt.bin").string(), csv = (dir / "pt.csv").string();
+  const Result r = travbench("rays --scene room --pathtrace Ref --spp 1 --width 32 --height 32 --out " + rays);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("iteration,kind,rays,packets"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0,pathtrace:ext,1024,"), std::string::npos) << r.out;
+  uint64_t total = 0;
+  std::stringstream ss(r.out);
+  for (std::string line; std::getline(ss, line);) {
+    if (line.find(",pathtrace:") == std::string::npos) continue;
+    std::stringstream ls(line);
+    std::string iteration, kind, count;
+    std::getline(ls, iteration, ',');
+    std::getline(ls, kind, ',');
+    std::getline(ls, count, ',');
+    total += std::stoull(count);
+  }
+  EXPECT_GT(total, 1024u) << "shadow rays and later segments follow the camera rays";
+  const Result t = travbench("trace --scene room --scheme mbvh_rs --param width=4 --rays " + rays + " --cache --csv " + csv);
+  ASSERT_EQ(t.code, 0) << t.out;
+  std::ifstream f(csv);
+  std::string header, row;
+  std::getline(f, header);
+  std::getline(f, row);
+  EXPECT_NE(header.find("l1_read_hit_m"), std::string::npos) << header;
+  EXPECT_NE(row.find("," + std::to_string(total) + ","), std::string::npos) << "the rays column holds every ray: " << row;
+  EXPECT_NE(travbench("trace --scene room --scheme mbvh_rs --rays " + rays + " --cache --hits " + (dir / "h.bin").string()).code, 0)
+      << "--cache without --csv has nowhere to go";
+  EXPECT_NE(travbench("rays --scene room --width 32 --height 32 --out " + rays).code, 0) << "neither --workload nor --pathtrace";
+  std::filesystem::remove_all(dir);
+}
+
 TEST(CLI, ListParamsPrintsEachSchemesDeclaredParameters) {
   const Result one = travbench("list params bvh_single");
   EXPECT_EQ(one.code, 0) << one.out;

@@ -197,6 +197,37 @@ TEST(PathTrace, RegenerationAndStreamingKeepMoreLanesActive) {
   EXPECT_GE(ref.warp_util(), ref.util()) << "a warp that finished stops counting; a packet counts to its last ray";
 }
 
+// The capture hook (`travbench rays --pathtrace`): every traced batch, in order, extension then
+// shadow per iteration, their rays the stats' counts; replaying them gives the frame's hits.
+TEST(PathTrace, TracedBatchesAreTheFramesRays) {
+  const Fixture& f = fixture();
+  PtOptions o;
+  o.width = o.height = 32, o.spp = 1, o.salt = "traced";
+  std::vector<RayBatch> traced;
+  o.traced = &traced;
+  PtStats st;
+  const PtImage img = render_pathtrace(f.scene, *f.tracer, f.lighting, PtMethod::ref, o, &st);
+  ASSERT_FALSE(traced.empty());
+  EXPECT_EQ(traced.front().workload, "pathtrace:ext");
+  EXPECT_EQ(traced.front().size(), 32u * 32u) << "iteration 0: one camera ray per pixel";
+  uint64_t ext = 0, shadow = 0;
+  for (size_t i = 0; i < traced.size(); ++i) {
+    const RayBatch& b = traced[i];
+    (b.workload == "pathtrace:ext" ? ext : shadow) += b.size();
+    EXPECT_EQ(b.packet_begin.back(), b.size());
+    if (b.workload == "pathtrace:shadow") {
+      ASSERT_GT(i, 0u);
+      EXPECT_EQ(traced[i - 1].workload, "pathtrace:ext") << "a shadow batch follows its iteration's extension rays";
+      EXPECT_EQ(traced[i - 1].depth, b.depth);
+    }
+  }
+  EXPECT_EQ(ext, st.ext_rays);
+  EXPECT_EQ(shadow, st.shadow_rays);
+  EXPECT_GT(shadow, 0u);
+  o.traced = nullptr;
+  EXPECT_EQ(render_pathtrace(f.scene, *f.tracer, f.lighting, PtMethod::ref, o).rgb, img.rgb) << "capturing changes nothing";
+}
+
 TEST(PathTrace, BadInputIsAnError) {
   const Fixture& f = fixture();
   EXPECT_THROW(f.render(PtMethod::ref, 0, "x"), InputError);
