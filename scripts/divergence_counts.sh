@@ -34,12 +34,8 @@ VIEWS=${VIEWS:-1,2,3}
 STRIDE=${STRIDE:-8}
 TIME_REPS=${TIME_REPS:-7}
 JOBS=${JOBS:-1}
-command -v valgrind >/dev/null || { echo "divergence_counts: valgrind is not installed (scripts/setup.sh)" >&2; exit 2; }
 if [ -z "${TB:-}" ]; then
-  cmake -S . -B build-valgrind -DCMAKE_BUILD_TYPE=Release -DTRAVBENCH_NATIVE=OFF >/dev/null
-  cmake --build build-valgrind -j "$(nproc)" --target travbench >build-valgrind/build.log 2>&1 ||
-    { tail -40 build-valgrind/build.log >&2; exit 1; }
-  TB=build-valgrind/travbench
+  TB=$(scripts/valgrind_build.sh)
 fi
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT

@@ -45,11 +45,7 @@ sim=()
 # as a 320 MB direct-mapped cache.
 [ "$PROFILE" = 1 ] && sim=(--cache-sim=yes --branch-sim=yes "--LL=${LL:-33554432,16,64}")
 
-command -v valgrind >/dev/null || { echo "instruction_counts: valgrind is not installed (scripts/setup.sh)" >&2; exit 2; }
-cmake -S . -B build-valgrind -DCMAKE_BUILD_TYPE=Release -DTRAVBENCH_NATIVE=OFF >/dev/null
-cmake --build build-valgrind -j "$(nproc)" --target travbench >build-valgrind/build.log 2>&1 ||
-  { tail -40 build-valgrind/build.log >&2; exit 1; }
-TB=build-valgrind/travbench
+TB=$(scripts/valgrind_build.sh)
 
 if [ -z "${SCHEMES:-}" ] || [ "$SCHEMES" = all ]; then
   SCHEMES=$($TB list schemes | grep -v '^reference$' | paste -sd,)

@@ -22,10 +22,7 @@ SCENE=${1:-../shared/scenes/conference.obj}
 name=$(basename "$SCENE"); name=${name%.*}
 OUT=${2:-results/$name/loads_per_ray.csv}
 SIZE=${SIZE:-128}
-command -v valgrind >/dev/null || { echo "loads_per_ray: valgrind is not installed (scripts/setup.sh)" >&2; exit 2; }
-cmake -S . -B build-valgrind -DCMAKE_BUILD_TYPE=Release -DTRAVBENCH_NATIVE=OFF >/dev/null
-cmake --build build-valgrind -j "$(nproc)" --target travbench >build-valgrind/build.log 2>&1 ||
-  { tail -40 build-valgrind/build.log >&2; exit 1; }
+TB_VG=$(scripts/valgrind_build.sh)
 cmake --build build -j "$(nproc)" --target travbench >/dev/null
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -37,7 +34,7 @@ measure() {
   echo "loads_per_ray: $s bounce:2 on $name (${SIZE}x${SIZE}) under callgrind" >&2
   # shellcheck disable=SC2086
   valgrind --tool=callgrind --cache-sim=yes --branch-sim=yes --collect-atstart=no --toggle-collect='tb::measure(*' \
-    --callgrind-out-file="$work/$s.cg" -q build-valgrind/travbench run --scene "$SCENE" --schemes "$s" $p \
+    --callgrind-out-file="$work/$s.cg" -q "$TB_VG" run --scene "$SCENE" --schemes "$s" $p \
     --workloads bounce:2 --width "$SIZE" --height "$SIZE" --reps 1 --threads 1 --csv "$work/$s.csv" >/dev/null 2>"$work/$s.log" ||
     { cat "$work/$s.log" >&2; exit 1; }
   # shellcheck disable=SC2086

@@ -33,18 +33,11 @@ cd "$(dirname "$0")/.."
 SCENE=${1:-../shared/scenes/conference.obj}
 name=$(basename "$SCENE"); name=${name%.*}
 OUT=${2:-results/$name/pathtrace_reads.csv}
-SIZE=${SIZE:-512}
-SPP=${SPP:-1}
-METHOD=${METHOD:-Ref}
-TB=${TB:-build/travbench}
+: "${SIZE:=512}" "${SPP:=1}" "${METHOD:=Ref}" "${TB:=build/travbench}"  # the environment's, else these
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-command -v valgrind >/dev/null || { echo "pathtrace_reads: valgrind is not installed (scripts/setup.sh)" >&2; exit 2; }
 if [ -z "${TB_VG:-}" ]; then  # a non-native travbench for valgrind, built as scripts/instruction_counts.sh does
-  cmake -S . -B build-valgrind -DCMAKE_BUILD_TYPE=Release -DTRAVBENCH_NATIVE=OFF >/dev/null
-  cmake --build build-valgrind -j "$(nproc)" --target travbench >build-valgrind/build.log 2>&1 ||
-    { tail -40 build-valgrind/build.log >&2; exit 1; }
-  TB_VG=build-valgrind/travbench
+  TB_VG=$(scripts/valgrind_build.sh)
 fi
 [ -x "$TB" ] || { echo "pathtrace_reads: no $TB (scripts/build.sh, or TB=...)" >&2; exit 2; }
 img=(--width "$SIZE" --height "$SIZE")
