@@ -1,0 +1,147 @@
+// The node test of the compressed 8-wide BVH (structures/cwbvh.h; cwbvh_single): plane distances
+// straight from the 8-bit child offsets, with a proven error bound instead of a decode.
+//
+// Ylitie, Karras and Laine (2017, §3.1) fold the decode into the slab test: a child plane
+// p + q * 2^e is crossed at t = (p + q * 2^e - o) / d = q * A + B with A = 2^e * (1/d) and
+// B = (p - o) * (1/d) computed once per node and axis, so a plane row costs one fused multiply-add
+// instead of a decode (fma), a subtraction of the origin and a multiply. Here B = p * r + c, with
+// c = -o * r - E a per-ray constant, and A and B of all three axes come from ONE 8-lane fma per
+// node ([2^e | p] * [r | r] + [0 | c]).
+//
+// That rounds differently from the decode the builder's conservative quantization is checked on
+// (cw_decode), and the error of q * A + B is not relative to t (the terms cancel when the ray starts
+// near the plane), so Ize's relative far padding does not cover it. The bound used instead
+// (notation of PBR 3rd ed. §3.9: u = 2^-24, gamma_1 = u / (1 - u)); per ray and axis:
+//   o the origin, r = fl(1/d) (normal: r = +-inf, 0 or NaN leaves the axis out, see below),
+//   R = |r|, K = CWBVH::coord_bound (>= |p| + 255 * 2^e of every node, so >= |p + q 2^e|),
+//   Z = (K + |o|) * R,   E = 12 u Z + 2^-110 (1 + R),
+//   c = -o * r - E rounded down to a float (at most two float ulps below: computed in double).
+// Per node A = fl(2^e r), B = fl(p r + c); per plane t = fl(q A + B); decoded plane D = fl(p + q 2^e)
+// (the builder's one rounding: CWBVH.FusedDecodeEqualsTheBuilderDecode), exact distance
+// T = (D - o) / d. With Y = p + q 2^e exact, q A + p r = Y r exactly, and:
+//   * the two fma roundings: |t - (Y r + c)| <= u |p r + c| + u |q A + B| <= 3.02 u (Z + E), plus
+//     flush-to-zero: < 2^-126 per result and < 255 * 2^-126 for q * A where A flushed (2^-117);
+//   * 1/d = r (1 + rho), |rho| <= gamma_1: |T - (D - o) r| <= gamma_1 Z (1.01);
+//   * |D - Y| <= u |Y| + 2^-126 <= u K + 2^-126 (one rounding, FTZ):  |(D - Y) r| <= u Z + 2^-126 R;
+//   * -o r - E - 4u (|o| R + E) <= c <= -o r - E.
+// Hence t <= T - E + 5.03 u Z + 3.02 u E + 2^-117 + 1.01 * 2^-126 R <= T: every computed plane
+// distance is a LOWER bound of the exact one (no padding on near planes, and the entry distance the
+// children are sorted and culled by never exceeds the true entry); and t >= T - E - 9.03 u Z -
+// 7.02 u E - (same absolute terms) >= T - 2E. The far distances are padded once per node: f = fl(
+// min_axes t_far + P), P >= 3 max_axes E (rounded up), and fl(.) loses at most u (|t| + P) <= E/3
+// (|t| <= 2.02 (Z + E)), so f >= min_axes T_far. With n = max(tmin, max_axes t_near) <= the exact
+// entry, a child whose exact interval [max(tmin, T_near), min(tfar, T_far)] is non-empty passes
+// n <= min(f, tfar): no false miss, at any offset, for flat children and origins on a plane
+// (CWBVH.FusedNodeTestIsConservative hammers it against long-double distances).
+// Overflow: an axis with 12 u Z > 2^100 is left out, so |A|, |B|, |t| <= 2^123 stay finite.
+// Left out (r = NaN: every t of the axis is NaN, which slab-style max/min skip, so the axis
+// constrains nothing — conservative): d = +-0 or a denormal (r = +-inf), |d| > 2^126 (r flushed to
+// 0), NaN, and the overflow case. The Williams et al. (2005) near/far selection by the sign of r is
+// kept (the arrays the ray enters through). The padding (P ~ 36 u (K + |o|) R, a few float ulps of
+// the scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi = 0) of a tiny
+// node: such a slot references a real one-triangle leaf (structures/cwbvh.h), so it costs a test.
+#pragma once
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+#include "structures/cwbvh.h"
+#include "traversal/kernels.h"
+
+namespace tb {
+
+// Per-ray constants of the fused node test: rc = [r_x r_y r_z 0 | r_x r_y r_z 0], cc = [0 0 0 0 |
+// c_x c_y c_z 0], the far pad P and tmin broadcast, and per axis the byte offsets in a node of the
+// quantized arrays holding the near and far planes (a direction with the sign bit set enters
+// through hi), so that the plane rows are chosen without a branch.
+struct CWRay {
+  __m256 rc, cc, pad, tmin, inf;
+  __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
+  uint32_t near_at[3], far_at[3];
+
+  CWRay(const RayCtx& rc_, float t0, const float coord_bound[3]) {
+    alignas(32) float r8[8] = {0}, c8[8] = {0};
+    double emax = 0;
+    for (int a = 0; a < 3; ++a) {
+      const float r = rc_.inv[a], o = rc_.org[a];
+      const double R = std::fabs(double(r)), Z = (double(coord_bound[a]) + std::fabs(double(o))) * R;
+      const bool use = R > 0 && R <= double(FLT_MAX) && 12 * 0x1p-24 * Z <= 0x1p100;
+      if (use) {
+        const double E = 12 * 0x1p-24 * Z + 0x1p-110 * (1 + R);
+        const double v = -double(o) * double(r) - E;  // -o * r exact in double; one rounding
+        float c = float(v);
+        if (double(c) > v) c = std::nextafter(c, -INFINITY);
+        c = std::nextafter(c, -INFINITY);  // below the exact -o r - E despite v's rounding
+        r8[a] = r8[4 + a] = r;
+        c8[4 + a] = c;
+        emax = std::max(emax, E);
+      } else {
+        r8[a] = r8[4 + a] = NAN;  // the axis constrains nothing
+      }
+      const uint32_t lo = uint32_t(offsetof(CWNode, qlo)) + 8u * uint32_t(a);
+      const uint32_t hi = uint32_t(offsetof(CWNode, qhi)) + 8u * uint32_t(a);
+      near_at[a] = std::signbit(r) ? hi : lo;
+      far_at[a] = std::signbit(r) ? lo : hi;
+    }
+    float p = float(3 * emax);
+    if (double(p) < 3 * emax) p = std::nextafter(p, INFINITY);
+    rc = _mm256_load_ps(r8);
+    cc = _mm256_load_ps(c8);
+    pad = _mm256_set1_ps(p);
+    tmin = _mm256_set1_ps(t0);
+    inf = _mm256_set1_ps(INFINITY);
+    bias = _mm_set1_epi32(127);
+    __asm__("" : "+x"(bias));
+  }
+};
+
+// The t = q * A + B of one plane row of 8 slots (q at byte offset `at` in the node).
+[[gnu::always_inline]] inline __m256 cw_plane(const CWNode& n, uint32_t at, __m256 A, __m256 B) {
+  const auto* q = reinterpret_cast<const __m128i*>(reinterpret_cast<const uint8_t*>(&n) + at);
+  return _mm256_fmadd_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(q))), A, B);
+}
+
+// The lanes (all-ones) whose child box the ray enters before tfar, and the entry distances tn (a
+// lower bound of the exact entry: see the bound above). Operand order as kernels.h's slab: a NaN
+// plane distance (an axis left out) is skipped by max/min.
+[[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, float tfar, __m256& tn) {
+  // [2^e_x 2^e_y 2^e_z junk | p_x p_y p_z junk]: the cells from e[0..2] (imask's lane unused), the
+  // origin loaded with the e bytes as its fourth lane (junk, never read).
+  static_assert(offsetof(CWNode, e) == offsetof(CWNode, p) + 12 && offsetof(CWNode, imask) == offsetof(CWNode, e) + 3);
+  int32_t e4;
+  std::memcpy(&e4, reinterpret_cast<const char*>(&nd) + offsetof(CWNode, e), sizeof e4);
+  const __m128 cells = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(_mm_cvtepi8_epi32(_mm_cvtsi32_si128(e4)), r.bias), 23));
+  const __m256 sp = _mm256_insertf128_ps(_mm256_castps128_ps256(cells), _mm_loadu_ps(nd.p), 1);
+  // [A_x A_y A_z . | B_x B_y B_z .]; A = fl(2^e r) (+0 is exact), B = fl(p r + c).
+  alignas(32) float ab[8];
+  _mm256_store_ps(ab, _mm256_fmadd_ps(sp, r.rc, r.cc));
+  __m256 n = r.tmin, f = r.inf;
+  for (int a = 0; a < 3; ++a) {
+    const __m256 A = _mm256_broadcast_ss(&ab[a]), B = _mm256_broadcast_ss(&ab[4 + a]);
+    n = _mm256_max_ps(cw_plane(nd, r.near_at[a], A, B), n);
+    f = _mm256_min_ps(cw_plane(nd, r.far_at[a], A, B), f);
+  }
+  f = _mm256_min_ps(_mm256_add_ps(f, r.pad), _mm256_set1_ps(tfar));
+  tn = n;
+  return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
+}
+
+// The 8 child references of a node: child_base + meta for interior slots, leaf_base + meta (the
+// compressed leaf reference, cw_leaf_ref) for the others. imask is the top byte of the dword at e:
+// shifting it left by 7 - i puts slot i's bit in lane i's sign bit, which blendv reads.
+[[gnu::always_inline]] inline __m256i cw_child_refs(const CWNode& n) {
+  int32_t e4;
+  std::memcpy(&e4, reinterpret_cast<const char*>(&n) + offsetof(CWNode, e), sizeof e4);
+  const __m256i interior = _mm256_sllv_epi32(_mm256_set1_epi32(e4), _mm256_setr_epi32(7, 6, 5, 4, 3, 2, 1, 0));
+  const __m256 base = _mm256_blendv_ps(_mm256_castsi256_ps(_mm256_set1_epi32(int(n.leaf_base))),
+                                       _mm256_castsi256_ps(_mm256_set1_epi32(int(n.child_base))), _mm256_castsi256_ps(interior));
+  const __m256i meta = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(n.meta)));
+  return _mm256_add_epi32(_mm256_castps_si256(base), meta);
+}
+
+}  // namespace tb
