@@ -215,7 +215,7 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
           const RayCtx rc(ray);
           const CWRay r(rc, tmin, t.bound);
           __m256 tn;
-          const int mask = _mm256_movemask_ps(cw_box_test(t.n, r, tfar, tn));
+          const int mask = _mm256_movemask_ps(cw_box_test(t.n, r, _mm256_set1_ps(tfar), tn));
           alignas(32) float tns[8];
           _mm256_store_ps(tns, tn);
           for (int i = 0; i < t.used; ++i) {

@@ -29,12 +29,13 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
   const CWNode* nodes = t.nodes.data();
   uint32_t sp = 0, cur = 0;
   float tfar = hit.t;
+  __m256 tfar8 = _mm256_set1_ps(tfar);  // changes only at a leaf
   for (;;) {
     if (!mbvh_ref::is_leaf(cur)) {
       const CWNode& nd = nodes[cur];
       probe.node(&nd, sizeof(nd));
       __m256 tn;
-      const __m256 entered = cw_box_test(nd, r, tfar, tn);
+      const __m256 entered = cw_box_test(nd, r, tfar8, tn);
       const int mask = S::mask(entered);
       if (mask) {
         const int count = std::popcount(unsigned(mask));
@@ -54,6 +55,7 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
       probe_leaf<8>(t.blocks.data(), leaf, probe, 1);
       leaf_test<8, TriKernel::watertight>(t.blocks.data(), nullptr, tr, nullptr, leaf, hit);
       tfar = hit.t;
+      tfar8 = _mm256_set1_ps(tfar);
     }
     if (!pop_pending(stack, sp, tfar, cur, probe)) return;
   }

@@ -14,37 +14,35 @@
 // (notation of PBR 3rd ed. §3.9: u = 2^-24, gamma_1 = u / (1 - u)); per ray and axis:
 //   o the origin, r = fl(1/d) (normal: r = +-inf, 0 or NaN leaves the axis out, see below),
 //   R = |r|, K = CWBVH::coord_bound (>= |p| + 255 * 2^e of every node, so >= |p + q 2^e|),
-//   Z = (K + |o|) * R,   E = 12 u Z + 2^-110 (1 + R),
-//   c = -o * r - E rounded down to a float (at most two float ulps below: computed in double).
+//   Z = (K + |o|) * R,   E = 16 u Z + 2^-110 (1 + R)   (evaluated in float: >= 15.99 u Z),
+//   c = fl(-o * r - E)   (one fma: |c - (-o r - E)| <= u (|o| R + E) <= u (Z + E)).
 // Per node A = fl(2^e r), B = fl(p r + c); per plane t = fl(q A + B); decoded plane D = fl(p + q 2^e)
 // (the builder's one rounding: CWBVH.FusedDecodeEqualsTheBuilderDecode), exact distance
 // T = (D - o) / d. With Y = p + q 2^e exact, q A + p r = Y r exactly, and:
 //   * the two fma roundings: |t - (Y r + c)| <= u |p r + c| + u |q A + B| <= 3.02 u (Z + E), plus
-//     flush-to-zero: < 2^-126 per result and < 255 * 2^-126 for q * A where A flushed (2^-117);
-//   * 1/d = r (1 + rho), |rho| <= gamma_1: |T - (D - o) r| <= gamma_1 Z (1.01);
-//   * |D - Y| <= u |Y| + 2^-126 <= u K + 2^-126 (one rounding, FTZ):  |(D - Y) r| <= u Z + 2^-126 R;
-//   * -o r - E - 4u (|o| R + E) <= c <= -o r - E.
-// Hence t <= T - E + 5.03 u Z + 3.02 u E + 2^-117 + 1.01 * 2^-126 R <= T: every computed plane
+//     flush-to-zero: < 2^-126 per result and < 255 * 2^-126 for q * A where A flushed (< 2^-117);
+//   * 1/d = r (1 + rho), |rho| <= gamma_1: |T - (D - o) r| <= 1.01 gamma_1 Z;
+//   * |D - Y| <= u |Y| + 2^-126 <= u K + 2^-126 (one rounding, FTZ): |(D - Y) r| <= u Z + 2^-126 R.
+// Hence t <= T - E + 6.04 u Z + 4.02 u E + 2^-117 + 1.01 * 2^-126 R <= T: every computed plane
 // distance is a LOWER bound of the exact one (no padding on near planes, and the entry distance the
-// children are sorted and culled by never exceeds the true entry); and t >= T - E - 9.03 u Z -
-// 7.02 u E - (same absolute terms) >= T - 2E. The far distances are padded once per node: f = fl(
-// min_axes t_far + P), P >= 3 max_axes E (rounded up), and fl(.) loses at most u (|t| + P) <= E/3
-// (|t| <= 2.02 (Z + E)), so f >= min_axes T_far. With n = max(tmin, max_axes t_near) <= the exact
-// entry, a child whose exact interval [max(tmin, T_near), min(tfar, T_far)] is non-empty passes
-// n <= min(f, tfar): no false miss, at any offset, for flat children and origins on a plane
-// (CWBVH.FusedNodeTestIsConservative hammers it against long-double distances).
-// Overflow: an axis with 12 u Z > 2^100 is left out, so |A|, |B|, |t| <= 2^123 stay finite.
-// Left out (r = NaN: every t of the axis is NaN, which slab-style max/min skip, so the axis
+// children are sorted and culled by never exceeds the true entry); and t >= T - E - 6.04 u Z -
+// 4.02 u E - (the same absolute terms) >= T - 2E. The far distances are padded once per node:
+// f = fl(min_axes t_far + P), P = fl(3 max_axes E), and that addition loses at most
+// u (|t| + P) <= u (2.02 (Z + E) + 3E) <= E / 2, so f >= min_axes T_far. With n = max(tmin,
+// max_axes t_near) <= the exact entry, a child whose exact interval [max(tmin, T_near),
+// min(tfar, T_far)] is non-empty passes n <= min(f, tfar): no false miss, at any offset, for flat
+// children and origins on a plane (CWBVH.FusedNodeTestIsConservative hammers it against
+// long-double distances; it fails with E = u Z).
+// Overflow: an axis with E > 2^100 is left out, so |A|, |B|, |t| <= 2^123 stay finite.
+// Left out (r = NaN: every t of the axis is NaN, which the slab-style max/min skip, so the axis
 // constrains nothing — conservative): d = +-0 or a denormal (r = +-inf), |d| > 2^126 (r flushed to
-// 0), NaN, and the overflow case. The Williams et al. (2005) near/far selection by the sign of r is
-// kept (the arrays the ray enters through). The padding (P ~ 36 u (K + |o|) R, a few float ulps of
-// the scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi = 0) of a tiny
+// 0), NaN, and the overflow case. The padding (P ~ 48 u (K + |o|) R, a few float ulps of the
+// scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi = 0) of a tiny
 // node: such a slot references a real one-triangle leaf (structures/cwbvh.h), so it costs a test.
 #pragma once
 #include <immintrin.h>
 
-#include <algorithm>
-#include <cfloat>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -55,48 +53,55 @@
 
 namespace tb {
 
+// Byte offsets in a node of the quantized rows holding the near (0..2) and far (3..5) planes of each
+// axis, by ray octant (bit a set: direction a negative, entered through hi; Williams et al. 2005).
+inline constexpr std::array<std::array<uint32_t, 6>, 8> kCWPlaneRows = [] {
+  std::array<std::array<uint32_t, 6>, 8> t{};
+  for (int o = 0; o < 8; ++o)
+    for (int a = 0; a < 3; ++a) {
+      const uint32_t lo = uint32_t(offsetof(CWNode, qlo)) + 8u * uint32_t(a);
+      const uint32_t hi = uint32_t(offsetof(CWNode, qhi)) + 8u * uint32_t(a);
+      t[o][a] = (o >> a & 1) ? hi : lo;
+      t[o][3 + a] = (o >> a & 1) ? lo : hi;
+    }
+  return t;
+}();
+
 // Per-ray constants of the fused node test: rc = [r_x r_y r_z 0 | r_x r_y r_z 0], cc = [0 0 0 0 |
-// c_x c_y c_z 0], the far pad P and tmin broadcast, and per axis the byte offsets in a node of the
-// quantized arrays holding the near and far planes (a direction with the sign bit set enters
-// through hi), so that the plane rows are chosen without a branch.
+// c_x c_y c_z 0] (an axis left out has r = NaN, c = 0), the far pad P and tmin broadcast, and the
+// plane rows of the ray's octant. Computed for the three axes at once in SSE, in float: each of
+// the four operations of E rounds by at most u, which 16u (against the 12u the bound needs with an
+// exact E) covers, and c = fl(-o r - E) is one fused rounding (the bound above).
 struct CWRay {
   __m256 rc, cc, pad, tmin, inf;
   __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
-  uint32_t near_at[3], far_at[3];
+  const uint32_t* rows;
 
-  CWRay(const RayCtx& rc_, float t0, const float coord_bound[3]) {
-    alignas(32) float r8[8] = {0}, c8[8] = {0};
-    double emax = 0;
-    for (int a = 0; a < 3; ++a) {
-      const float r = rc_.inv[a], o = rc_.org[a];
-      const double R = std::fabs(double(r)), Z = (double(coord_bound[a]) + std::fabs(double(o))) * R;
-      const bool use = R > 0 && R <= double(FLT_MAX) && 12 * 0x1p-24 * Z <= 0x1p100;
-      if (use) {
-        const double E = 12 * 0x1p-24 * Z + 0x1p-110 * (1 + R);
-        const double v = -double(o) * double(r) - E;  // -o * r exact in double; one rounding
-        float c = float(v);
-        if (double(c) > v) c = std::nextafter(c, -INFINITY);
-        c = std::nextafter(c, -INFINITY);  // below the exact -o r - E despite v's rounding
-        r8[a] = r8[4 + a] = r;
-        c8[4 + a] = c;
-        emax = std::max(emax, E);
-      } else {
-        r8[a] = r8[4 + a] = NAN;  // the axis constrains nothing
-      }
-      const uint32_t lo = uint32_t(offsetof(CWNode, qlo)) + 8u * uint32_t(a);
-      const uint32_t hi = uint32_t(offsetof(CWNode, qhi)) + 8u * uint32_t(a);
-      near_at[a] = std::signbit(r) ? hi : lo;
-      far_at[a] = std::signbit(r) ? lo : hi;
-    }
-    float p = float(3 * emax);
-    if (double(p) < 3 * emax) p = std::nextafter(p, INFINITY);
-    rc = _mm256_load_ps(r8);
-    cc = _mm256_load_ps(c8);
-    pad = _mm256_set1_ps(p);
+  CWRay(const RayCtx& ray, float t0, const float coord_bound[3]) {
+    const __m128 r = _mm_setr_ps(ray.inv.x, ray.inv.y, ray.inv.z, 0.f);
+    const __m128 o = _mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.f);
+    const __m128 k = _mm_setr_ps(coord_bound[0], coord_bound[1], coord_bound[2], 0.f);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+    const __m128 R = _mm_and_ps(r, abs_mask);
+    const __m128 Z = _mm_mul_ps(_mm_add_ps(k, _mm_and_ps(o, abs_mask)), R);
+    const __m128 E = _mm_fmadd_ps(Z, _mm_set1_ps(16 * 0x1p-24f),
+                                  _mm_mul_ps(_mm_add_ps(R, _mm_set1_ps(1.f)), _mm_set1_ps(0x1p-110f)));
+    // Used: 0 < R and E <= 2^100 (false for R = inf or NaN, and for the overflow case); lane 3 off.
+    const __m128 use = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(R, _mm_setzero_ps()), _mm_cmple_ps(E, _mm_set1_ps(0x1p100f))),
+                                  _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)));
+    const __m128 rr = _mm_blendv_ps(_mm_set1_ps(NAN), r, use);
+    const __m128 c = _mm_and_ps(_mm_fmadd_ps(_mm_sub_ps(_mm_setzero_ps(), o), r, _mm_sub_ps(_mm_setzero_ps(), E)), use);
+    __m128 em = _mm_and_ps(E, use);
+    em = _mm_max_ps(em, _mm_movehl_ps(em, em));
+    em = _mm_max_ps(em, _mm_movehdup_ps(em));
+    rc = _mm256_insertf128_ps(_mm256_castps128_ps256(rr), rr, 1);
+    cc = _mm256_insertf128_ps(_mm256_setzero_ps(), c, 1);
+    pad = _mm256_broadcastss_ps(_mm_mul_ps(em, _mm_set1_ps(3.f)));
     tmin = _mm256_set1_ps(t0);
     inf = _mm256_set1_ps(INFINITY);
     bias = _mm_set1_epi32(127);
-    __asm__("" : "+x"(bias));
+    __asm__("" : "+x"(bias), "+x"(inf));  // opaque: memory operands, not rebuilt per node
+    rows = kCWPlaneRows[_mm_movemask_ps(r) & 7].data();
   }
 };
 
@@ -106,10 +111,10 @@ struct CWRay {
   return _mm256_fmadd_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(q))), A, B);
 }
 
-// The lanes (all-ones) whose child box the ray enters before tfar, and the entry distances tn (a
+// The lanes (all-ones) whose child box the ray enters before tfar (broadcast), and the entry distances tn (a
 // lower bound of the exact entry: see the bound above). Operand order as kernels.h's slab: a NaN
 // plane distance (an axis left out) is skipped by max/min.
-[[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, float tfar, __m256& tn) {
+[[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, __m256 tfar, __m256& tn) {
   // [2^e_x 2^e_y 2^e_z junk | p_x p_y p_z junk]: the cells from e[0..2] (imask's lane unused), the
   // origin loaded with the e bytes as its fourth lane (junk, never read).
   static_assert(offsetof(CWNode, e) == offsetof(CWNode, p) + 12 && offsetof(CWNode, imask) == offsetof(CWNode, e) + 3);
@@ -123,10 +128,10 @@ struct CWRay {
   __m256 n = r.tmin, f = r.inf;
   for (int a = 0; a < 3; ++a) {
     const __m256 A = _mm256_broadcast_ss(&ab[a]), B = _mm256_broadcast_ss(&ab[4 + a]);
-    n = _mm256_max_ps(cw_plane(nd, r.near_at[a], A, B), n);
-    f = _mm256_min_ps(cw_plane(nd, r.far_at[a], A, B), f);
+    n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, B), n);
+    f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, B), f);
   }
-  f = _mm256_min_ps(_mm256_add_ps(f, r.pad), _mm256_set1_ps(tfar));
+  f = _mm256_min_ps(_mm256_add_ps(f, r.pad), tfar);
   tn = n;
   return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
 }
