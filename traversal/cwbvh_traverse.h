@@ -4,9 +4,8 @@
 // Ylitie, Karras and Laine (2017, §3.1) fold the decode into the slab test: a child plane
 // p + q * 2^e is crossed at t = (p + q * 2^e - o) / d = q * A + B with A = 2^e * (1/d) and
 // B = (p - o) * (1/d) computed once per node and axis, so a plane row costs one fused multiply-add
-// instead of a decode (fma), a subtraction of the origin and a multiply. Here B = p * r + c, with
-// c = -o * r - E a per-ray constant, and A and B of all three axes come from ONE 8-lane fma per
-// node ([2^e | p] * [r | r] + [0 | c]).
+// instead of a decode (fma), a subtraction of the origin and a multiply. Here B = p * r + c with a
+// per-ray constant c that also carries the error bound: c_near = -o r - E, c_far = -o r + E.
 //
 // That rounds differently from the decode the builder's conservative quantization is checked on
 // (cw_decode), and the error of q * A + B is not relative to t (the terms cancel when the ray starts
@@ -14,8 +13,8 @@
 // (notation of PBR 3rd ed. §3.9: u = 2^-24, gamma_1 = u / (1 - u)); per ray and axis:
 //   o the origin, r = fl(1/d) (normal: r = +-inf, 0 or NaN leaves the axis out, see below),
 //   R = |r|, K = CWBVH::coord_bound (>= |p| + 255 * 2^e of every node, so >= |p + q 2^e|),
-//   Z = (K + |o|) * R,   E = 16 u Z + 2^-110 (1 + R)   (evaluated in float: >= 15.99 u Z),
-//   c = fl(-o * r - E)   (one fma: |c - (-o r - E)| <= u (|o| R + E) <= u (Z + E)).
+//   Z = (K + |o|) * R,   E = 8 u Z + 2^-110 (1 + R)   (evaluated in float: >= 7.99 u Z),
+//   c = fl(-o * r -+ E)   (one fma: |c - (-o r -+ E)| <= u (|o| R + E) <= u (Z + E)).
 // Per node A = fl(2^e r), B = fl(p r + c); per plane t = fl(q A + B); decoded plane D = fl(p + q 2^e)
 // (the builder's one rounding: CWBVH.FusedDecodeEqualsTheBuilderDecode), exact distance
 // T = (D - o) / d. With Y = p + q 2^e exact, q A + p r = Y r exactly, and:
@@ -23,22 +22,21 @@
 //     flush-to-zero: < 2^-126 per result and < 255 * 2^-126 for q * A where A flushed (< 2^-117);
 //   * 1/d = r (1 + rho), |rho| <= gamma_1: |T - (D - o) r| <= 1.01 gamma_1 Z;
 //   * |D - Y| <= u |Y| + 2^-126 <= u K + 2^-126 (one rounding, FTZ): |(D - Y) r| <= u Z + 2^-126 R.
-// Hence t <= T - E + 6.04 u Z + 4.02 u E + 2^-117 + 1.01 * 2^-126 R <= T: every computed plane
-// distance is a LOWER bound of the exact one (no padding on near planes, and the entry distance the
-// children are sorted and culled by never exceeds the true entry); and t >= T - E - 6.04 u Z -
-// 4.02 u E - (the same absolute terms) >= T - 2E. The far distances are padded once per node:
-// f = fl(min_axes t_far + P), P = fl(3 max_axes E), and that addition loses at most
-// u (|t| + P) <= u (2.02 (Z + E) + 3E) <= E / 2, so f >= min_axes T_far. With n = max(tmin,
-// max_axes t_near) <= the exact entry, a child whose exact interval [max(tmin, T_near),
-// min(tfar, T_far)] is non-empty passes n <= min(f, tfar): no false miss, at any offset, for flat
-// children and origins on a plane (CWBVH.FusedNodeTestIsConservative hammers it against
-// long-double distances; it fails with E = u Z).
+// Hence |t - (T -+ E)| <= 6.04 u Z + 4.02 u E + 2^-117 + 1.01 * 2^-126 R < E: every near plane's
+// computed distance (c_near) is a LOWER bound of the exact one and every far plane's (c_far) an
+// UPPER bound. So n = max(tmin, max_axes t_near) never exceeds the exact entry (the distance the
+// children are sorted and culled by) and f = min(tfar, min_axes t_far) never falls below the exact
+// exit: a child whose exact interval [max(tmin, T_near), min(tfar, T_far)] is non-empty passes
+// n <= f. No false miss, at any offset, for flat children and origins on a plane
+// (CWBVH.FusedNodeTestIsConservative hammers it against long-double distances; it fails with
+// E = u Z).
 // Overflow: an axis with E > 2^100 is left out, so |A|, |B|, |t| <= 2^123 stay finite.
 // Left out (r = NaN: every t of the axis is NaN, which the slab-style max/min skip, so the axis
 // constrains nothing — conservative): d = +-0 or a denormal (r = +-inf), |d| > 2^126 (r flushed to
-// 0), NaN, and the overflow case. The padding (P ~ 48 u (K + |o|) R, a few float ulps of the
-// scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi = 0) of a tiny
-// node: such a slot references a real one-triangle leaf (structures/cwbvh.h), so it costs a test.
+// 0), NaN, and the overflow case. The bound (2E ~ 16 u (K + |o|) R between near and far, a few
+// float ulps of the scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi =
+// 0) of a tiny node: such a slot references a real one-triangle leaf (structures/cwbvh.h), so it
+// costs a test.
 #pragma once
 #include <immintrin.h>
 
@@ -67,13 +65,12 @@ inline constexpr std::array<std::array<uint32_t, 6>, 8> kCWPlaneRows = [] {
   return t;
 }();
 
-// Per-ray constants of the fused node test: rc = [r_x r_y r_z 0 | r_x r_y r_z 0], cc = [0 0 0 0 |
-// c_x c_y c_z 0] (an axis left out has r = NaN, c = 0), the far pad P and tmin broadcast, and the
-// plane rows of the ray's octant. Computed for the three axes at once in SSE, in float: each of
-// the four operations of E rounds by at most u, which 16u (against the 12u the bound needs with an
-// exact E) covers, and c = fl(-o r - E) is one fused rounding (the bound above).
+// Per-ray constants of the fused node test, broadcast per axis: r, c_near and c_far (an axis left
+// out has r = NaN, c = 0), tmin, and the plane rows of the ray's octant. Computed for the three
+// axes at once in SSE, in float: each of the four operations of E rounds by at most u (E >= 7.99 u
+// Z, where the bound needs 6.04 u Z + 4.02 u E), and c = fl(-o r -+ E) is one fused rounding.
 struct CWRay {
-  __m256 rc, cc, pad, tmin, inf;
+  __m256 r8[3], cn8[3], cf8[3], tmin;
   __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
   const uint32_t* rows;
 
@@ -84,23 +81,21 @@ struct CWRay {
     const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
     const __m128 R = _mm_and_ps(r, abs_mask);
     const __m128 Z = _mm_mul_ps(_mm_add_ps(k, _mm_and_ps(o, abs_mask)), R);
-    const __m128 E = _mm_fmadd_ps(Z, _mm_set1_ps(16 * 0x1p-24f),
+    const __m128 E = _mm_fmadd_ps(Z, _mm_set1_ps(8 * 0x1p-24f),
                                   _mm_mul_ps(_mm_add_ps(R, _mm_set1_ps(1.f)), _mm_set1_ps(0x1p-110f)));
     // Used: 0 < R and E <= 2^100 (false for R = inf or NaN, and for the overflow case); lane 3 off.
     const __m128 use = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(R, _mm_setzero_ps()), _mm_cmple_ps(E, _mm_set1_ps(0x1p100f))),
                                   _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)));
     const __m128 rr = _mm_blendv_ps(_mm_set1_ps(NAN), r, use);
-    const __m128 c = _mm_and_ps(_mm_fmadd_ps(_mm_sub_ps(_mm_setzero_ps(), o), r, _mm_sub_ps(_mm_setzero_ps(), E)), use);
-    __m128 em = _mm_and_ps(E, use);
-    em = _mm_max_ps(em, _mm_movehl_ps(em, em));
-    em = _mm_max_ps(em, _mm_movehdup_ps(em));
-    rc = _mm256_insertf128_ps(_mm256_castps128_ps256(rr), rr, 1);
-    cc = _mm256_insertf128_ps(_mm256_setzero_ps(), c, 1);
-    pad = _mm256_broadcastss_ps(_mm_mul_ps(em, _mm_set1_ps(3.f)));
+    const __m128 no = _mm_sub_ps(_mm_setzero_ps(), o);
+    const __m128 cn = _mm_and_ps(_mm_fmadd_ps(no, r, _mm_sub_ps(_mm_setzero_ps(), E)), use);
+    const __m128 cf = _mm_and_ps(_mm_fmadd_ps(no, r, E), use);
+    alignas(16) float rs[4], ns[4], fs[4];
+    _mm_store_ps(rs, rr), _mm_store_ps(ns, cn), _mm_store_ps(fs, cf);
+    for (int a = 0; a < 3; ++a) r8[a] = _mm256_set1_ps(rs[a]), cn8[a] = _mm256_set1_ps(ns[a]), cf8[a] = _mm256_set1_ps(fs[a]);
     tmin = _mm256_set1_ps(t0);
-    inf = _mm256_set1_ps(INFINITY);
     bias = _mm_set1_epi32(127);
-    __asm__("" : "+x"(bias), "+x"(inf));  // opaque: memory operands, not rebuilt per node
+    __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
     rows = kCWPlaneRows[_mm_movemask_ps(r) & 7].data();
   }
 };
@@ -121,17 +116,17 @@ struct CWRay {
   int32_t e4;
   std::memcpy(&e4, reinterpret_cast<const char*>(&nd) + offsetof(CWNode, e), sizeof e4);
   const __m128 cells = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(_mm_cvtepi8_epi32(_mm_cvtsi32_si128(e4)), r.bias), 23));
-  const __m256 sp = _mm256_insertf128_ps(_mm256_castps128_ps256(cells), _mm_loadu_ps(nd.p), 1);
-  // [A_x A_y A_z . | B_x B_y B_z .]; A = fl(2^e r) (+0 is exact), B = fl(p r + c).
-  alignas(32) float ab[8];
-  _mm256_store_ps(ab, _mm256_fmadd_ps(sp, r.rc, r.cc));
-  __m256 n = r.tmin, f = r.inf;
+  const __m256 s[3] = {_mm256_broadcastss_ps(cells), _mm256_broadcastss_ps(_mm_movehdup_ps(cells)),
+                       _mm256_broadcastss_ps(_mm_movehl_ps(cells, cells))};
+  __m256 n = r.tmin, f = tfar;
   for (int a = 0; a < 3; ++a) {
-    const __m256 A = _mm256_broadcast_ss(&ab[a]), B = _mm256_broadcast_ss(&ab[4 + a]);
-    n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, B), n);
-    f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, B), f);
+    // A = fl(2^e r), B = fl(p r + c) for the near and the far planes, each from broadcasts: no store
+    // and reload on the path from the node's bytes to the plane distances (single-ray traversal
+    // waits on it at every node), and the max/min chains are the slab test's.
+    const __m256 A = _mm256_mul_ps(s[a], r.r8[a]), P = _mm256_broadcast_ss(&nd.p[a]);
+    n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, _mm256_fmadd_ps(P, r.r8[a], r.cn8[a])), n);
+    f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, _mm256_fmadd_ps(P, r.r8[a], r.cf8[a])), f);
   }
-  f = _mm256_min_ps(_mm256_add_ps(f, r.pad), tfar);
   tn = n;
   return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
 }
