@@ -12,11 +12,11 @@ namespace tb {
 
 namespace {
 
-// volatile-free but opaque to constant folding across the MXCSR change: the operation the
-// traversal performs, one fused multiply-add in float (traversal/cwbvh_single.cpp, decode8). It
-// equals the multiply then add it replaced wherever q * s is finite (q * 2^e is exact then); where
-// q * 2^e overflows (e >= 121, only for coordinates near the float range's end) the fused form
-// stays finite, and the builder checks the fused one so that quantization stays conservative.
+// volatile-free but opaque to constant folding across the MXCSR change: the decode, one fused
+// multiply-add in float (one rounding, which the traversal's error bound in
+// traversal/cwbvh_traverse.h assumes). It equals a multiply then add wherever q * s is finite
+// (q * 2^e is exact then); where q * 2^e overflows (e >= 121, only for coordinates near the float
+// range's end) the fused form stays finite, and the builder checks the fused one.
 [[gnu::noinline]] float decode_f(float p, float s, float q) { return std::fma(q, s, p); }
 
 }  // namespace

@@ -17,13 +17,13 @@
 // tested by the same watertight SIMD kernel.
 //
 // Conservative quantization: a child's box decodes as lo = p + q_lo * 2^e, hi = p + q_hi * 2^e in
-// float, with exactly the operations (and flush-to-zero mode) of the traversal's SIMD decode; the
-// builder picks q_lo as the largest and q_hi as the smallest 8-bit value for which the decoded
-// box still contains the true child box, checking the decoded floats themselves rather than
-// trusting an error bound. The decoded box therefore always contains the true box, at any offset
-// and for flat children; the traversal's slab test (Ize's padding) then sees a box at least as
-// large as the MBVH8's. Unused slots decode to boxes with lo > hi on every axis, which no ray
-// enters.
+// float, one fused multiply-add each in flush-to-zero mode (cw_decode); the builder picks q_lo as
+// the largest and q_hi as the smallest 8-bit value for which the decoded box still contains the
+// true child box, checking the decoded floats themselves rather than trusting an error bound. The
+// decoded box therefore always contains the true box, at any offset and for flat children. The
+// traversal (traversal/cwbvh_traverse.h) never forms these floats: its fused plane distances are
+// bounded against them, a bound that takes the decode's one rounding into account. Unused slots
+// decode to boxes with lo > hi on every axis.
 #pragma once
 #include <xmmintrin.h>
 
@@ -69,7 +69,7 @@ struct CWBVH {
   // Re-lays out and quantizes an 8-wide MBVH with 8-wide blocks only (small_leaf = 0) and leaves
   // of at most 16 triangles; throws std::invalid_argument otherwise.
   static CWBVH compress(const MBVH<8, 8>& m);
-  // The decoded (conservative) box of slot i, computed as the traversal does.
+  // The decoded (conservative) box of slot i (cw_decode per coordinate).
   AABB child_box(uint32_t node, int slot) const;
   // Slot i's child in the MBVH reference format (mbvh_ref: interior = node index, leaf = first
   // block and triangle count), or 0 for an unused slot of a node with no such child.
@@ -95,8 +95,7 @@ float cw_decode(float p, float s, uint8_t q);
 
 // Flush-to-zero and denormals-are-zero for the calling thread while in scope. Every tracing thread
 // runs with FTZ/DAZ (harness/trace_runner); the builder's decode checks, child_box and the tests
-// of the cw_* functions run in the same mode so that a decoded coordinate near zero rounds as it
-// will in the traversal.
+// of the cw_* functions run in the same mode, the mode the traversal's error bound assumes.
 struct FlushDenormals {
   unsigned saved = _mm_getcsr();
   FlushDenormals() { _mm_setcsr(saved | 0x8040); }  // FTZ (bit 15) | DAZ (bit 6)

@@ -3,9 +3,9 @@
 // being bandwidth bound). Each node is 80 bytes instead of the MBVH8's 256. The node test
 // computes the child planes' distances straight from the 8-bit offsets, one fused multiply-add per
 // plane row (Ylitie et al. §3.1), with a proven error bound in place of Ize's padding: every
-// computed near distance is a lower bound and the far ones are padded once per node, so a child the
-// ray really enters is never culled (traversal/cwbvh_traverse.h has the bound; the builder's
-// quantization guarantees the decoded box contains the true one).
+// computed near distance is a lower bound and every far one an upper bound of the exact distance,
+// so a child the ray really enters is never culled (traversal/cwbvh_traverse.h has the bound; the
+// builder's quantization guarantees the decoded box contains the true one).
 // Children are ordered as mbvh8_single's "sort always" path orders them (bitonic network on
 // distance keys), leaves are the MBVH8's 8-wide triangle blocks under the watertight SIMD test.
 // The tree is the SAH-collapsed MBVH8 (same parameters as mbvh8_single, leaves of at most 16
