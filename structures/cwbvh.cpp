@@ -12,11 +12,11 @@ namespace tb {
 
 namespace {
 
-// volatile-free but opaque to constant folding across the MXCSR change: the operation the
-// traversal performs, one fused multiply-add in float (traversal/cwbvh_single.cpp, decode8). It
-// equals the multiply then add it replaced wherever q * s is finite (q * 2^e is exact then); where
-// q * 2^e overflows (e >= 121, only for coordinates near the float range's end) the fused form
-// stays finite, and the builder checks the fused one so that quantization stays conservative.
+// volatile-free but opaque to constant folding across the MXCSR change: the decode, one fused
+// multiply-add in float (one rounding, which the traversal's error bound in
+// traversal/cwbvh_traverse.h assumes). It equals a multiply then add wherever q * s is finite
+// (q * 2^e is exact then); where q * 2^e overflows (e >= 121, only for coordinates near the float
+// range's end) the fused form stays finite, and the builder checks the fused one.
 [[gnu::noinline]] float decode_f(float p, float s, float q) { return std::fma(q, s, p); }
 
 }  // namespace
@@ -86,7 +86,7 @@ uint32_t CWBVH::child_ref(uint32_t node, int slot) const {
   const CWNode& n = nodes[node];
   if (n.imask >> slot & 1) return n.child_base + n.meta[slot];
   if (!slot_used(node, slot)) return 0;
-  return mbvh_ref::make_leaf(n.block_base + (n.meta[slot] & 15u), (n.meta[slot] >> 4) + 1u);
+  return cw_leaf_to_mbvh(n.leaf_base + n.meta[slot]);
 }
 
 CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
@@ -105,6 +105,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
   if (!m.nodes.empty()) stack.push_back({0, 0, 1});
   double growth = 0;
   uint64_t growth_n = 0, children = 0;
+  double bound[3] = {0, 0, 0};
   while (!stack.empty()) {
     const Item it = stack.back();
     stack.pop_back();
@@ -122,7 +123,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
     }
     // Interior children consecutively, then this node's leaf blocks consecutively.
     n.child_base = uint32_t(out.nodes.size());
-    n.block_base = uint32_t(out.blocks.size());
+    const uint32_t first_block = uint32_t(out.blocks.size());
     uint32_t interior = 0, block_off = 0;
     std::vector<Item> kids;
     for (int i = 0; i < 8; ++i) {
@@ -144,7 +145,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
         const uint32_t ntris = mbvh_ref::num_tris(ref), nblocks = (ntris + 7) / 8;
         if (ntris > 16) throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most 16: merge <= 16)");
         if (block_off + nblocks > 16) throw std::invalid_argument("cwbvh: more than 16 leaf blocks under one node");
-        n.meta[i] = uint8_t(block_off | (ntris - 1) << 4);
+        n.meta[i] = uint8_t(block_off << 4 | (ntris - 1));
         for (uint32_t k = 0; k < nblocks; ++k) out.blocks.push_back(m.blocks[mbvh_ref::first_block(ref) + k]);
         block_off += nblocks;
         out.stats.leaves++;
@@ -157,9 +158,18 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
       const float ta = b.area();
       if (ta > 0) growth += double(decode_box(n, i).area()) / ta - 1.0, growth_n++;
     }
+    // Unused slots (meta 0) reference a real triangle: the node's first leaf block, or block 0.
+    if (first_block + block_off >= kCWMaxBlocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
+    n.leaf_base = cw_leaf_ref(block_off ? first_block : 0, 1);
+    for (int a = 0; a < 3; ++a)
+      bound[a] = std::max(bound[a], std::fabs(double(n.p[a])) + 255.0 * double(cw_scale(n.e[a])));
     out.nodes.resize(out.nodes.size() + interior);
     out.nodes[it.dst] = n;
     for (auto k = kids.rbegin(); k != kids.rend(); ++k) stack.push_back(*k);
+  }
+  for (int a = 0; a < 3; ++a) {  // rounded up to a float
+    out.coord_bound[a] = float(bound[a]);
+    if (double(out.coord_bound[a]) < bound[a]) out.coord_bound[a] = std::nextafter(out.coord_bound[a], INFINITY);
   }
   CWBVHStats& s = out.stats;
   s.nodes = uint32_t(out.nodes.size());

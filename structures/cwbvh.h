@@ -7,18 +7,23 @@
 //
 // Layout (Ylitie et al.'s, adapted to the CPU leaf blocks): interior children of a node are stored
 // consecutively from `child_base` (slot i's node is child_base + meta[i]), the triangle blocks of
-// its leaf children consecutively from `block_base` (meta[i] = block offset | (triangles - 1) << 4,
-// so a leaf holds at most 16 triangles and a node's leaves at most 16 blocks). Leaves are the
-// MBVH8's TriBlock<8> SoA blocks, tested by the same watertight SIMD kernel.
+// its leaf children consecutively from its first leaf block b. A leaf slot's reference is
+// leaf_base + meta[i], leaf_base = kLeaf | b << 4 and meta[i] = block offset << 4 | (triangles - 1):
+// the compressed leaf reference (cw_leaf_*), so that the traversal forms all 8 references with one
+// select and one add. A leaf holds at most 16 triangles and a node's leaves at most 16 blocks.
+// Unused slots have meta 0 and no imask bit: their reference is a real one-triangle leaf (the
+// node's first block, block 0 where it has none), so a ray that a padded box test lets into an
+// unused slot only tests a triangle of the scene. Leaves are the MBVH8's TriBlock<8> SoA blocks,
+// tested by the same watertight SIMD kernel.
 //
 // Conservative quantization: a child's box decodes as lo = p + q_lo * 2^e, hi = p + q_hi * 2^e in
-// float, with exactly the operations (and flush-to-zero mode) of the traversal's SIMD decode; the
-// builder picks q_lo as the largest and q_hi as the smallest 8-bit value for which the decoded
-// box still contains the true child box, checking the decoded floats themselves rather than
-// trusting an error bound. The decoded box therefore always contains the true box, at any offset
-// and for flat children; the traversal's slab test (Ize's padding) then sees a box at least as
-// large as the MBVH8's. Unused slots decode to boxes with lo > hi on every axis, which no ray
-// enters.
+// float, one fused multiply-add each in flush-to-zero mode (cw_decode); the builder picks q_lo as
+// the largest and q_hi as the smallest 8-bit value for which the decoded box still contains the
+// true child box, checking the decoded floats themselves rather than trusting an error bound. The
+// decoded box therefore always contains the true box, at any offset and for flat children. The
+// traversal (traversal/cwbvh_traverse.h) never forms these floats: its fused plane distances are
+// bounded against them, a bound that takes the decode's one rounding into account. Unused slots
+// decode to boxes with lo > hi on every axis.
 #pragma once
 #include <xmmintrin.h>
 
@@ -36,8 +41,8 @@ struct alignas(16) CWNode {
   int8_t e[3];         // cell size 2^e per axis
   uint8_t imask;       // bit i: slot i is an interior node
   uint32_t child_base;  // first interior child node
-  uint32_t block_base;  // first triangle block of the leaf children
-  uint8_t meta[8];     // interior: rank among the interior children; leaf: offset | (tris - 1) << 4
+  uint32_t leaf_base;   // kLeaf | first leaf block << 4 (cw_leaf_ref)
+  uint8_t meta[8];     // interior: rank among the interior children; leaf: offset << 4 | (tris - 1)
   uint8_t qlo[3][8];   // quantized child boxes, per axis and slot
   uint8_t qhi[3][8];
 };
@@ -56,17 +61,29 @@ struct CWBVH {
   aligned_vector<CWNode> nodes;          // nodes[0] = root
   aligned_vector<TriBlock<8>> blocks;    // leaf triangles, each node's leaves contiguous
   CWBVHStats stats;
+  // Per axis an upper bound of |p| + 255 * 2^e over all nodes (so of every coordinate a node's
+  // grid can express), rounded up: the traversal's per-ray error bound of its fused plane
+  // distances is proportional to it (traversal/cwbvh_traverse.h).
+  float coord_bound[3] = {0, 0, 0};
 
   // Re-lays out and quantizes an 8-wide MBVH with 8-wide blocks only (small_leaf = 0) and leaves
   // of at most 16 triangles; throws std::invalid_argument otherwise.
   static CWBVH compress(const MBVH<8, 8>& m);
-  // The decoded (conservative) box of slot i, computed as the traversal does.
+  // The decoded (conservative) box of slot i (cw_decode per coordinate).
   AABB child_box(uint32_t node, int slot) const;
   // Slot i's child in the MBVH reference format (mbvh_ref: interior = node index, leaf = first
   // block and triangle count), or 0 for an unused slot of a node with no such child.
   uint32_t child_ref(uint32_t node, int slot) const;
   bool slot_used(uint32_t node, int slot) const;
 };
+
+// The compressed leaf reference: kLeaf | first block << 4 | (triangles - 1), at most 16 triangles
+// and 2^27 blocks. cw_leaf_to_mbvh gives the MBVH reference the leaf kernels take.
+inline constexpr uint32_t kCWMaxBlocks = 1u << 27;
+constexpr uint32_t cw_leaf_ref(uint32_t first_block, uint32_t ntris) { return mbvh_ref::kLeaf | first_block << 4 | (ntris - 1); }
+constexpr uint32_t cw_leaf_to_mbvh(uint32_t r) {
+  return mbvh_ref::make_leaf((r >> 4) & (kCWMaxBlocks - 1), (r & 15u) + 1);
+}
 
 // One axis of a node's grid: the cell size 2^e for origin p and largest coordinate hi, and the
 // 8-bit offsets of [lo, hi] (exposed for tests).
@@ -78,8 +95,7 @@ float cw_decode(float p, float s, uint8_t q);
 
 // Flush-to-zero and denormals-are-zero for the calling thread while in scope. Every tracing thread
 // runs with FTZ/DAZ (harness/trace_runner); the builder's decode checks, child_box and the tests
-// of the cw_* functions run in the same mode so that a decoded coordinate near zero rounds as it
-// will in the traversal.
+// of the cw_* functions run in the same mode, the mode the traversal's error bound assumes.
 struct FlushDenormals {
   unsigned saved = _mm_getcsr();
   FlushDenormals() { _mm_setcsr(saved | 0x8040); }  // FTZ (bit 15) | DAZ (bit 6)

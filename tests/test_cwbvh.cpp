@@ -5,11 +5,14 @@
 #include <immintrin.h>
 
 #include <bit>
+#include <cfloat>
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include "structures/builtin_scenes.h"
 #include "structures/cwbvh.h"
+#include "traversal/cwbvh_traverse.h"
 #include "test_util.h"
 
 namespace tb {
@@ -45,8 +48,9 @@ TEST(CWBVH, QuantizationIsConservative) {
   }
 }
 
-// cwbvh_single decodes with a packed fused multiply-add; the builder checks its quantization with
-// cw_decode. They must agree bit for bit (the conservativeness proof is about the decoded floats):
+// The decoded plane is one rounding of p + q * 2^e (a fused multiply-add): the builder checks its
+// quantization with cw_decode, and the error bound of cwbvh_single's fused node test
+// (traversal/cwbvh_traverse.h) assumes that single rounding. A packed fma must give the same floats:
 // every q, every exponent, origins at zero, tiny, negative, at 1e5-1e7 offsets and near the float
 // range's end (where q * 2^e overflows), in flush-to-zero mode. Where q * 2^e is finite the fused
 // decode also equals the multiply then add it replaced (so every compressed tree is unchanged).
@@ -78,6 +82,162 @@ TEST(CWBVH, FusedDecodeEqualsTheBuilderDecode) {
   }
 }
 
+// The fused node test of cwbvh_single (traversal/cwbvh_traverse.h) against long-double distances to
+// the TRUE child boxes: every child whose exact interval [max(tmin, near), min(tfar, far)] is
+// non-empty must be entered, with an entry distance at or below the exact one. Nodes at offsets
+// 0 to 1e6 with flat children (zero extent on one or all axes) and tiny ones; origins on a child's
+// plane, inside a child, near and far; directions aimed at a child's inside, faces, edges and
+// corners (grazing), random ones, with components +-0, denormal (0 under DAZ) and 1e-30. The same
+// rays through the UNPADDED fused formula (t = q * fl(2^e r) + fl((p - o) r), as Ylitie et al.
+// compute it) must cull some entered child, or the hammer would not test the bound.
+struct TestNode {
+  CWNode n{};
+  AABB box[8];
+  int used = 0;
+  float bound[3];
+};
+
+TestNode random_node(std::mt19937& rng, Vec3 center, float scale) {
+  std::uniform_real_distribution<float> U(-1.f, 1.f), U01(0.f, 1.f);
+  TestNode t;
+  t.used = 2 + int(rng() % 7);
+  AABB u;
+  for (int i = 0; i < t.used; ++i) {
+    Vec3 c = center + Vec3{U(rng), U(rng), U(rng)} * scale, h;
+    for (int a = 0; a < 3; ++a) {
+      const int k = int(rng() % 5);
+      h[a] = k == 0 ? 0.f : k == 1 ? 1e-4f * scale * U01(rng) : k == 2 ? 1e-7f * scale : scale * U01(rng);
+    }
+    if (rng() % 8 == 0) h = {0, 0, 0};  // a point
+    t.box[i].lo = c - h, t.box[i].hi = c + h;
+    u.grow(t.box[i]);
+  }
+  for (int a = 0; a < 3; ++a) {
+    t.n.p[a] = u.lo[a];
+    t.n.e[a] = cw_exponent(t.n.p[a], u.hi[a]);
+    const float s = cw_scale(t.n.e[a]);
+    for (int i = 0; i < 8; ++i) {
+      if (i >= t.used) {
+        t.n.qlo[a][i] = 255, t.n.qhi[a][i] = 0;
+        continue;
+      }
+      t.n.qhi[a][i] = cw_quantize_hi(t.n.p[a], s, t.box[i].hi[a]);
+      t.n.qlo[a][i] = std::min(cw_quantize_lo(t.n.p[a], s, t.box[i].lo[a]), t.n.qhi[a][i]);
+    }
+    // CWBVH::compress's bound for a tree of this one node.
+    const double b = std::fabs(double(t.n.p[a])) + 255.0 * double(s);
+    t.bound[a] = float(b);
+    if (double(t.bound[a]) < b) t.bound[a] = std::nextafter(t.bound[a], INFINITY);
+  }
+  return t;
+}
+
+// Exact entry/exit of the ray the traversal sees (DAZ: |d| < 2^-126 is 0, parallel to the slab).
+bool exact_interval(const AABB& b, Vec3 o, Vec3 d, float tmin, float tfar, long double& t0, long double& t1) {
+  t0 = tmin, t1 = tfar;
+  for (int a = 0; a < 3; ++a) {
+    if (std::fabs(d[a]) < FLT_MIN) {
+      if (o[a] < b.lo[a] || o[a] > b.hi[a]) return false;
+      continue;
+    }
+    long double n = ((long double)b.lo[a] - o[a]) / d[a], f = ((long double)b.hi[a] - o[a]) / d[a];
+    if (n > f) std::swap(n, f);
+    t0 = std::max(t0, n), t1 = std::min(t1, f);
+  }
+  return t0 <= t1;
+}
+
+// The unpadded fused test of one slot (for the control count only).
+bool unpadded_enters(const TestNode& t, int i, Vec3 o, Vec3 d, float tmin, float tfar) {
+  float n = tmin, f = tfar;
+  for (int a = 0; a < 3; ++a) {
+    const float r = 1.f / d[a];
+    if (!std::isfinite(r)) continue;
+    const float A = cw_scale(t.n.e[a]) * r, B = (t.n.p[a] - o[a]) * r;
+    const bool neg = std::signbit(r);
+    const float tn = std::fma(float(neg ? t.n.qhi[a][i] : t.n.qlo[a][i]), A, B);
+    const float tf = std::fma(float(neg ? t.n.qlo[a][i] : t.n.qhi[a][i]), A, B);
+    n = std::max(n, tn), f = std::min(f, tf);
+  }
+  return n <= f;
+}
+
+TEST(CWBVH, FusedNodeTestIsConservative) {
+  const FlushDenormals ftz;
+  std::mt19937 rng(19);
+  std::uniform_real_distribution<float> U(-1.f, 1.f), U01(0.f, 1.f);
+  uint64_t checked = 0, entered_exact = 0, unpadded_misses = 0;
+  for (float offset : {0.f, 1.f, 1e5f, -1e5f, 3e5f, 1e6f, -1e6f}) {
+    for (float scale : {1e-3f, 1.f, 100.f}) {
+      for (int k = 0; k < 400; ++k) {
+        const TestNode t = random_node(rng, Vec3{offset, -0.5f * offset, 0.25f * offset}, scale);
+        for (int j = 0; j < 40; ++j) {
+          const AABB& c = t.box[rng() % uint32_t(t.used)];
+          auto inside = [&](const AABB& b) {
+            return Vec3{b.lo.x + (b.hi.x - b.lo.x) * U01(rng), b.lo.y + (b.hi.y - b.lo.y) * U01(rng),
+                        b.lo.z + (b.hi.z - b.lo.z) * U01(rng)};
+          };
+          auto on_boundary = [&](const AABB& b) {  // a face, edge or corner
+            Vec3 q = inside(b);
+            for (int a = 0; a < 3; ++a)
+              if (rng() % 2) q[a] = rng() % 2 ? b.lo[a] : b.hi[a];
+            return q;
+          };
+          Vec3 o;
+          switch (rng() % 4) {
+            case 0: o = c.lo + Vec3{U(rng), U(rng), U(rng)} * (3 * scale); break;
+            case 1: o = on_boundary(c) + Vec3{U(rng), U(rng), U(rng)} * scale; break;
+            case 2: o = inside(c); break;
+            default: o = c.lo + Vec3{U(rng), U(rng), U(rng)} * (1e3f * scale); break;
+          }
+          if (rng() % 3 == 0) {  // the origin on one of the child's planes
+            const int a = int(rng() % 3);
+            o[a] = rng() % 2 ? c.lo[a] : c.hi[a];
+          }
+          Vec3 d;
+          switch (rng() % 3) {
+            case 0: d = inside(c) - o; break;
+            case 1: d = on_boundary(c) - o; break;
+            default: d = {U(rng), U(rng), U(rng)}; break;
+          }
+          for (int a = 0; a < 3; ++a) {
+            const uint32_t m = rng() % 16;
+            if (m == 0) d[a] = 0.f;
+            else if (m == 1) d[a] = -0.f;
+            else if (m == 2) d[a] = 1e-40f;  // denormal: 0 under DAZ
+            else if (m == 3) d[a] = std::copysign(1e-30f, U(rng));
+          }
+          if (d.x == 0 && d.y == 0 && d.z == 0) d.z = 1;
+          const float tmin = rng() % 4 == 0 ? 1e-3f * U01(rng) : 0.f;
+          const float tfar = rng() % 3 == 0 ? 2.f * U01(rng) : INFINITY;
+          Ray ray;
+          ray.org = o, ray.dir = d, ray.tmin = tmin, ray.tmax = tfar;
+          const RayCtx rc(ray);
+          const CWRay r(rc, tmin, t.bound);
+          __m256 tn;
+          const int mask = _mm256_movemask_ps(cw_box_test(t.n, r, _mm256_set1_ps(tfar), tn));
+          alignas(32) float tns[8];
+          _mm256_store_ps(tns, tn);
+          for (int i = 0; i < t.used; ++i) {
+            long double t0, t1;
+            ++checked;
+            if (!exact_interval(t.box[i], o, d, tmin, tfar, t0, t1)) continue;
+            ++entered_exact;
+            ASSERT_TRUE(mask >> i & 1) << "a child the ray enters was culled: offset " << offset << " scale " << scale
+                                       << " slot " << i << " exact [" << double(t0) << ", " << double(t1) << "]";
+            ASSERT_LE((long double)tns[i], t0) << "entry distance above the exact one";
+            if (!unpadded_enters(t, i, o, d, tmin, tfar)) ++unpadded_misses;
+          }
+        }
+      }
+    }
+  }
+  std::printf("fused node test: %llu child tests, %llu entered exactly, unpadded formula culled %llu of them\n",
+              (unsigned long long)checked, (unsigned long long)entered_exact, (unsigned long long)unpadded_misses);
+  EXPECT_GT(entered_exact, checked / 20) << "the rays should enter a fair share of the children";
+  EXPECT_GT(unpadded_misses, 0u) << "no ray tested the bound: the unpadded formula never culled an entered child";
+}
+
 MBVH<8, 8> mbvh8_of(const Scene& s) {
   MBVHBuildParams p;
   p.sah_collapse = true;
@@ -99,6 +259,12 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c) {
     for (int i = 0; i < 8; ++i) {
       if (uint32_t(i) >= mn.num_children) {
         ASSERT_FALSE(c.slot_used(ci, i));
+        // The reference the traversal forms for it is a real one-triangle leaf (a padded box test
+        // may let a ray into an unused slot of a tiny node).
+        const uint32_t raw = c.nodes[ci].leaf_base + c.nodes[ci].meta[i];
+        ASSERT_TRUE(mbvh_ref::is_leaf(raw));
+        EXPECT_EQ(mbvh_ref::num_tris(cw_leaf_to_mbvh(raw)), 1u);
+        EXPECT_LT(mbvh_ref::first_block(cw_leaf_to_mbvh(raw)), c.blocks.size());
         const AABB b = c.child_box(ci, i);
         EXPECT_TRUE(b.lo.x > b.hi.x && b.lo.y > b.hi.y && b.lo.z > b.hi.z) << "unused slot not inverted";
         continue;

@@ -1,0 +1,147 @@
+// The node test of the compressed 8-wide BVH (structures/cwbvh.h; cwbvh_single): plane distances
+// straight from the 8-bit child offsets, with a proven error bound instead of a decode.
+//
+// Ylitie, Karras and Laine (2017, §3.1) fold the decode into the slab test: a child plane
+// p + q * 2^e is crossed at t = (p + q * 2^e - o) / d = q * A + B with A = 2^e * (1/d) and
+// B = (p - o) * (1/d) computed once per node and axis, so a plane row costs one fused multiply-add
+// instead of a decode (fma), a subtraction of the origin and a multiply. Here B = p * r + c with a
+// per-ray constant c that also carries the error bound: c_near = -o r - E, c_far = -o r + E.
+//
+// That rounds differently from the decode the builder's conservative quantization is checked on
+// (cw_decode), and the error of q * A + B is not relative to t (the terms cancel when the ray starts
+// near the plane), so Ize's relative far padding does not cover it. The bound used instead
+// (notation of PBR 3rd ed. §3.9: u = 2^-24, gamma_1 = u / (1 - u)); per ray and axis:
+//   o the origin, r = fl(1/d) (normal: r = +-inf, 0 or NaN leaves the axis out, see below),
+//   R = |r|, K = CWBVH::coord_bound (>= |p| + 255 * 2^e of every node, so >= |p + q 2^e|),
+//   Z = (K + |o|) * R,   E = 8 u Z + 2^-110 (1 + R)   (evaluated in float: >= 7.99 u Z),
+//   c = fl(-o * r -+ E)   (one fma: |c - (-o r -+ E)| <= u (|o| R + E) <= u (Z + E)).
+// Per node A = fl(2^e r), B = fl(p r + c); per plane t = fl(q A + B); decoded plane D = fl(p + q 2^e)
+// (the builder's one rounding: CWBVH.FusedDecodeEqualsTheBuilderDecode), exact distance
+// T = (D - o) / d. With Y = p + q 2^e exact, q A + p r = Y r exactly, and:
+//   * the two fma roundings: |t - (Y r + c)| <= u |p r + c| + u |q A + B| <= 3.02 u (Z + E), plus
+//     flush-to-zero: < 2^-126 per result and < 255 * 2^-126 for q * A where A flushed (< 2^-117);
+//   * 1/d = r (1 + rho), |rho| <= gamma_1: |T - (D - o) r| <= 1.01 gamma_1 Z;
+//   * |D - Y| <= u |Y| + 2^-126 <= u K + 2^-126 (one rounding, FTZ): |(D - Y) r| <= u Z + 2^-126 R.
+// Hence |t - (T -+ E)| <= 6.04 u Z + 4.02 u E + 2^-117 + 1.01 * 2^-126 R < E: every near plane's
+// computed distance (c_near) is a LOWER bound of the exact one and every far plane's (c_far) an
+// UPPER bound. So n = max(tmin, max_axes t_near) never exceeds the exact entry (the distance the
+// children are sorted and culled by) and f = min(tfar, min_axes t_far) never falls below the exact
+// exit: a child whose exact interval [max(tmin, T_near), min(tfar, T_far)] is non-empty passes
+// n <= f. No false miss, at any offset, for flat children and origins on a plane
+// (CWBVH.FusedNodeTestIsConservative hammers it against long-double distances; it fails with
+// E = u Z).
+// Overflow: an axis with E > 2^100 is left out, so |A|, |B|, |t| <= 2^123 stay finite.
+// Left out (r = NaN: every t of the axis is NaN, which the slab-style max/min skip, so the axis
+// constrains nothing — conservative): d = +-0 or a denormal (r = +-inf), |d| > 2^126 (r flushed to
+// 0), NaN, and the overflow case. The bound (2E ~ 16 u (K + |o|) R between near and far, a few
+// float ulps of the scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi =
+// 0) of a tiny node: such a slot references a real one-triangle leaf (structures/cwbvh.h), so it
+// costs a test.
+#pragma once
+#include <immintrin.h>
+
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+#include "structures/cwbvh.h"
+#include "traversal/kernels.h"
+
+namespace tb {
+
+// Byte offsets in a node of the quantized rows holding the near (0..2) and far (3..5) planes of each
+// axis, by ray octant (bit a set: direction a negative, entered through hi; Williams et al. 2005).
+inline constexpr std::array<std::array<uint32_t, 6>, 8> kCWPlaneRows = [] {
+  std::array<std::array<uint32_t, 6>, 8> t{};
+  for (int o = 0; o < 8; ++o)
+    for (int a = 0; a < 3; ++a) {
+      const uint32_t lo = uint32_t(offsetof(CWNode, qlo)) + 8u * uint32_t(a);
+      const uint32_t hi = uint32_t(offsetof(CWNode, qhi)) + 8u * uint32_t(a);
+      t[o][a] = (o >> a & 1) ? hi : lo;
+      t[o][3 + a] = (o >> a & 1) ? lo : hi;
+    }
+  return t;
+}();
+
+// Per-ray constants of the fused node test, broadcast per axis: r, c_near and c_far (an axis left
+// out has r = NaN, c = 0), tmin, and the plane rows of the ray's octant. Computed for the three
+// axes at once in SSE, in float: each of the four operations of E rounds by at most u (E >= 7.99 u
+// Z, where the bound needs 6.04 u Z + 4.02 u E), and c = fl(-o r -+ E) is one fused rounding.
+struct CWRay {
+  __m256 r8[3], cn8[3], cf8[3], tmin;
+  __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
+  const uint32_t* rows;
+
+  CWRay(const RayCtx& ray, float t0, const float coord_bound[3]) {
+    const __m128 r = _mm_setr_ps(ray.inv.x, ray.inv.y, ray.inv.z, 0.f);
+    const __m128 o = _mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.f);
+    const __m128 k = _mm_setr_ps(coord_bound[0], coord_bound[1], coord_bound[2], 0.f);
+    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+    const __m128 R = _mm_and_ps(r, abs_mask);
+    const __m128 Z = _mm_mul_ps(_mm_add_ps(k, _mm_and_ps(o, abs_mask)), R);
+    const __m128 E = _mm_fmadd_ps(Z, _mm_set1_ps(8 * 0x1p-24f),
+                                  _mm_mul_ps(_mm_add_ps(R, _mm_set1_ps(1.f)), _mm_set1_ps(0x1p-110f)));
+    // Used: 0 < R and E <= 2^100 (false for R = inf or NaN, and for the overflow case); lane 3 off.
+    const __m128 use = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(R, _mm_setzero_ps()), _mm_cmple_ps(E, _mm_set1_ps(0x1p100f))),
+                                  _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)));
+    const __m128 rr = _mm_blendv_ps(_mm_set1_ps(NAN), r, use);
+    const __m128 no = _mm_sub_ps(_mm_setzero_ps(), o);
+    const __m128 cn = _mm_and_ps(_mm_fmadd_ps(no, r, _mm_sub_ps(_mm_setzero_ps(), E)), use);
+    const __m128 cf = _mm_and_ps(_mm_fmadd_ps(no, r, E), use);
+    alignas(16) float rs[4], ns[4], fs[4];
+    _mm_store_ps(rs, rr), _mm_store_ps(ns, cn), _mm_store_ps(fs, cf);
+    for (int a = 0; a < 3; ++a) r8[a] = _mm256_set1_ps(rs[a]), cn8[a] = _mm256_set1_ps(ns[a]), cf8[a] = _mm256_set1_ps(fs[a]);
+    tmin = _mm256_set1_ps(t0);
+    bias = _mm_set1_epi32(127);
+    __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
+    rows = kCWPlaneRows[_mm_movemask_ps(r) & 7].data();
+  }
+};
+
+// The t = q * A + B of one plane row of 8 slots (q at byte offset `at` in the node).
+[[gnu::always_inline]] inline __m256 cw_plane(const CWNode& n, uint32_t at, __m256 A, __m256 B) {
+  const auto* q = reinterpret_cast<const __m128i*>(reinterpret_cast<const uint8_t*>(&n) + at);
+  return _mm256_fmadd_ps(_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(_mm_loadl_epi64(q))), A, B);
+}
+
+// The lanes (all-ones) whose child box the ray enters before tfar (broadcast), and the entry distances tn (a
+// lower bound of the exact entry: see the bound above). Operand order as kernels.h's slab: a NaN
+// plane distance (an axis left out) is skipped by max/min.
+[[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, __m256 tfar, __m256& tn) {
+  // [2^e_x 2^e_y 2^e_z junk | p_x p_y p_z junk]: the cells from e[0..2] (imask's lane unused), the
+  // origin loaded with the e bytes as its fourth lane (junk, never read).
+  static_assert(offsetof(CWNode, e) == offsetof(CWNode, p) + 12 && offsetof(CWNode, imask) == offsetof(CWNode, e) + 3);
+  int32_t e4;
+  std::memcpy(&e4, reinterpret_cast<const char*>(&nd) + offsetof(CWNode, e), sizeof e4);
+  const __m128 cells = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(_mm_cvtepi8_epi32(_mm_cvtsi32_si128(e4)), r.bias), 23));
+  const __m256 s[3] = {_mm256_broadcastss_ps(cells), _mm256_broadcastss_ps(_mm_movehdup_ps(cells)),
+                       _mm256_broadcastss_ps(_mm_movehl_ps(cells, cells))};
+  __m256 n = r.tmin, f = tfar;
+  for (int a = 0; a < 3; ++a) {
+    // A = fl(2^e r), B = fl(p r + c) for the near and the far planes, each from broadcasts: no store
+    // and reload on the path from the node's bytes to the plane distances (single-ray traversal
+    // waits on it at every node), and the max/min chains are the slab test's.
+    const __m256 A = _mm256_mul_ps(s[a], r.r8[a]), P = _mm256_broadcast_ss(&nd.p[a]);
+    n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, _mm256_fmadd_ps(P, r.r8[a], r.cn8[a])), n);
+    f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, _mm256_fmadd_ps(P, r.r8[a], r.cf8[a])), f);
+  }
+  tn = n;
+  return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
+}
+
+// The 8 child references of a node: child_base + meta for interior slots, leaf_base + meta (the
+// compressed leaf reference, cw_leaf_ref) for the others. imask is the top byte of the dword at e:
+// shifting it left by 7 - i puts slot i's bit in lane i's sign bit, which blendv reads.
+[[gnu::always_inline]] inline __m256i cw_child_refs(const CWNode& n) {
+  int32_t e4;
+  std::memcpy(&e4, reinterpret_cast<const char*>(&n) + offsetof(CWNode, e), sizeof e4);
+  const __m256i interior = _mm256_sllv_epi32(_mm256_set1_epi32(e4), _mm256_setr_epi32(7, 6, 5, 4, 3, 2, 1, 0));
+  const __m256 base = _mm256_blendv_ps(_mm256_castsi256_ps(_mm256_set1_epi32(int(n.leaf_base))),
+                                       _mm256_castsi256_ps(_mm256_set1_epi32(int(n.child_base))), _mm256_castsi256_ps(interior));
+  const __m256i meta = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(n.meta)));
+  return _mm256_add_epi32(_mm256_castps_si256(base), meta);
+}
+
+}  // namespace tb
