@@ -6,6 +6,7 @@
 
 #include "cachesim/hierarchy.h"
 #include "traversal/mbvh_traverse.h"
+#include "workloads/hard_cases.h"
 #include "test_geometry.h"
 #include "test_util.h"
 
@@ -283,6 +284,12 @@ void block_matches_scalar() {
       for (uint32_t l = 0; l < lanes; ++l) intersect_tri<TriKernel::watertight>(rc, ts, l, ray.tmin, a);
       block_intersect<W>(TriRay<W>(rc, ray.tmin), blk, b, lanes);
       ASSERT_EQ(a.prim, b.prim) << "iter " << iter << " ray " << r;
+      if constexpr (W == 4) {  // a small leaf's block under an 8-wide ray (the low halves of its constants)
+        Hit c = initial_hit(ray);
+        block_intersect<4, 8>(TriRay<8>(rc, ray.tmin), blk, c, lanes);
+        ASSERT_EQ(c.prim, b.prim) << "iter " << iter << " ray " << r;
+        if (c.hit()) EXPECT_TRUE(c.t == b.t && c.u == b.u && c.v == b.v) << "iter " << iter << " ray " << r;
+      }
       if (a.hit()) {
         ++hits;
         EXPECT_EQ(a.t, b.t);
@@ -397,10 +404,10 @@ TEST(MBVH, StreamSizesMatchReference) {
 TEST(MBVH, ParametersAreValidated) {
   for (const auto& [k, v] : std::vector<std::pair<std::string, std::string>>{
            {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"},
-           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}}) {
+           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}, {"order", "fast"}}) {
     SchemeConfig cfg;
     cfg.params[k] = v;
-    const char* scheme = k == "stream" ? "mbvh_rs" : k == "tri_width" ? "mbvh8_single" : "mbvh4_single";
+    const char* scheme = k == "stream" ? "mbvh_rs" : k == "tri_width" || k == "order" ? "mbvh8_single" : "mbvh4_single";
     EXPECT_THROW(make_scheme(scheme, cfg), InputError) << k << "=" << v;
   }
 }
@@ -444,6 +451,44 @@ TEST(MBVH, EveryKernelVariantRuns) {
       EXPECT_GE(double(agree), 0.99 * double(hits.size())) << v.scheme << " " << kernel_name(k);
       if (k == TriKernel::watertight) {
         EXPECT_LE(hits.size() - agree, 1u) << v.scheme;
+      }
+    }
+  }
+}
+
+// mbvh8_single's child orders (`order`, ChildOrder in traversal/mbvh_traverse.h) and its small
+// leaves: each matches the exact reference on ordinary and hard rays without a leak, and `auto`
+// traces common-origin batches exactly as `branching` and the others exactly as `sort` (the same
+// hits, bit for bit).
+TEST(MBVH, ChildOrdersMatchTheReferenceAndAutoPicksByBatch) {
+  for (const char* scene : {"room", "sphere"}) {  // closed: every must-hit hard ray hits
+    Bench& bench = test::bench_for(scene);
+    for (const std::string w : {"primary", "bounce:2", "hard:edges", "hard:vertices", "hard:inside"}) {
+      const WorkloadSpec spec = test::small_spec(w, 64);
+      const RayBatch& b = bench.rays(spec);
+      std::map<std::string, std::vector<Hit>> got;
+      // "small": auto with 4-wide blocks for leaves of <= 4 triangles, tested through the low
+      // halves of the 8-wide ray's constants (lanes_of).
+      for (const std::string order : {"sort", "branching", "auto", "small"}) {
+        SchemeConfig cfg;
+        if (order == "small") cfg.params["small"] = "4";
+        else cfg.params["order"] = order;
+        const Accuracy a = test::accuracy_of(bench, "mbvh8_single", spec, cfg);
+        if (w.rfind("hard:", 0) == 0 && hard_case_must_hit(w)) {
+          EXPECT_EQ(a.false_miss, 0u) << scene << " " << w << " " << order;  // no leak
+        } else {
+          EXPECT_LE(a.mismatches, 1u) << scene << " " << w << " " << order;
+        }
+        auto t = make_scheme("mbvh8_single", cfg);
+        t->prepare(bench.scene(), bench.cache());
+        got[order].resize(b.size());
+        trace_batch(*t, b, got[order], 1);
+      }
+      const std::vector<Hit>& same = b.common_origin ? got["branching"] : got["sort"];
+      for (size_t i = 0; i < b.size(); ++i) {
+        const Hit &x = got["auto"][i], &y = same[i];
+        ASSERT_TRUE(x.prim == y.prim && (!x.hit() || (x.t == y.t && x.u == y.u && x.v == y.v)))
+            << scene << " " << w << " ray " << i;
       }
     }
   }

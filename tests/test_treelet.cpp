@@ -50,13 +50,21 @@ TEST(Treelets, PartitionCoversTheTreeWithinBudget) {
   }
 }
 
+// mbvh8_single with the child order treelet_queue's loop runs for every batch (ChildOrder::
+// sort_always): its default `auto` takes the branching order for common-origin batches.
+SchemeConfig sort_order() {
+  SchemeConfig c;
+  c.params["order"] = "sort";
+  return c;
+}
+
 // Bit-identical hits to mbvh8_single on ordinary and hard workloads, with the default (L2) budget
 // and a tiny one that makes rays cross treelet boundaries many times, and a ray pool smaller than
 // the batch (slots are reused).
 TEST(TreeletQueue, HitsAreBitIdenticalToMBVH8Single) {
   for (const std::string scene : {"room", "sphere@148376,1234,-223423"}) {
     Bench& bench = test::bench_for(scene);
-    auto ref = make_scheme("mbvh8_single");
+    auto ref = make_scheme("mbvh8_single", sort_order());
     ref->prepare(bench.scene(), bench.cache());
     std::vector<std::string> workloads = {"primary", "bounce:2", "shadow"};
     for (const auto& h : hard_case_names()) workloads.push_back(h);
@@ -102,7 +110,7 @@ TEST(TreeletQueue, StatsShowQueuedRaysAndSwitches) {
 TEST(TreeletQueue, MemoryReadSplitAddsUpToSimulatedReads) {
   Bench& bench = test::bench_for("stadium");
   const RayBatch& b = bench.rays(test::small_spec("bounce:2", 64));
-  auto ref = make_scheme("mbvh8_single");
+  auto ref = make_scheme("mbvh8_single", sort_order());
   ref->prepare(bench.scene(), bench.cache());
   std::vector<Hit> a(b.size()), q(b.size());
   trace_batch(*ref, b, a, 1);

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <map>
+#include <mutex>
+#include <vector>
 #include <stdexcept>
 
 namespace tb {
@@ -22,19 +25,47 @@ bool on_memory(void*, ssize_t bytes, bool) {
 }
 }  // namespace
 
-RTCDevice embree_device() {
-  static RTCDevice device = [] {
-    RTCDevice d = rtcNewDevice("threads=1,set_affinity=0");
-    if (!d) throw std::runtime_error("embree: rtcNewDevice failed");
-    rtcSetDeviceErrorFunction(d, on_error, nullptr);
-    rtcSetDeviceMemoryMonitorFunction(d, on_memory, nullptr);
-    return d;
-  }();
-  return device;
+namespace {
+// The `isa` values and what the CPU needs for each (Embree 3.13's ISA groups: its AVX2 kernels
+// also use FMA3 and BMI1/2, its AVX-512 ones F, DQ, CD, BW and VL).
+bool cpu_has_isa(const std::string& isa) {
+  if (isa == "sse2") return true;  // x86-64
+  if (isa == "sse4.2") return __builtin_cpu_supports("sse4.2");
+  if (isa == "avx") return __builtin_cpu_supports("avx");
+  if (isa == "avx2")
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi") &&
+           __builtin_cpu_supports("bmi2");
+  if (isa == "avx512")
+    return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
+           __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512bw") &&
+           __builtin_cpu_supports("avx512vl");
+  return false;
+}
+const std::vector<std::string> kIsaNames = {"default", "sse2", "sse4.2", "avx", "avx2", "avx512"};
+}  // namespace
+
+RTCDevice embree_device(const std::string& isa) {
+  static std::mutex mu;
+  static std::map<std::string, RTCDevice> devices;
+  const std::lock_guard<std::mutex> lock(mu);
+  if (auto it = devices.find(isa); it != devices.end()) return it->second;
+  std::string config = "threads=1,set_affinity=0";
+  if (isa != "default") {
+    if (std::find(kIsaNames.begin(), kIsaNames.end(), isa) == kIsaNames.end())
+      throw InputError("embree isa '" + isa + "': not one of default, sse2, sse4.2, avx, avx2, avx512");
+    if (!cpu_has_isa(isa)) throw InputError("embree isa '" + isa + "': this CPU does not support it");
+    config += ",isa=" + isa;
+  }
+  RTCDevice d = rtcNewDevice(config.c_str());
+  if (!d) throw std::runtime_error("embree: rtcNewDevice(\"" + config + "\") failed");
+  rtcSetDeviceErrorFunction(d, on_error, nullptr);
+  rtcSetDeviceMemoryMonitorFunction(d, on_memory, nullptr);
+  devices.emplace(isa, d);
+  return d;
 }
 
-EmbreeScene::EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust) {
-  RTCDevice dev = embree_device();
+EmbreeScene::EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust, const std::string& isa) {
+  RTCDevice dev = embree_device(isa);
   const int64_t before = g_device_bytes.load();
   scene_ = rtcNewScene(dev);
   rtcSetSceneFlags(scene_, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
@@ -70,18 +101,24 @@ EmbreeScene::~EmbreeScene() {
 }
 
 std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, StructureCache& cache,
-                                                      EmbreeQuality quality, bool robust) {
-  const std::string key = "embree:q" + std::to_string(int(quality)) + (robust ? ":robust" : ":fast");
-  return cache.get<EmbreeScene>(key, [&] { return EmbreeScene(scene, quality, robust); });
+                                                      EmbreeQuality quality, bool robust, const std::string& isa) {
+  const std::string key =
+      "embree:q" + std::to_string(int(quality)) + (robust ? ":robust" : ":fast") + (isa == "default" ? "" : ":" + isa);
+  return cache.get<EmbreeScene>(key, [&] { return EmbreeScene(scene, quality, robust, isa); });
 }
 
 ParamSpecs embree_param_specs() {
   return {bool_param("robust", true, "RTC_SCENE_FLAG_ROBUST: Embree's watertight mode (0: its fast default)"),
           choice_param("quality", "high", {"low", "medium", "high"},
-                       "rtcSetSceneBuildQuality: low (Morton), medium (binned SAH), high (SAH; spatial splits when robust=0)")};
+                       "rtcSetSceneBuildQuality: low (Morton), medium (binned SAH), high (SAH; spatial splits when robust=0)"),
+          choice_param("isa", "default", kIsaNames,
+                       "Embree's kernel ISA: default (its run-time choice, the CPU's best) or the device config "
+                       "isa=NAME, for like-for-like comparisons across machines (refused where the CPU lacks it)")};
 }
 
 bool embree_robust(const SchemeConfig& cfg) { return cfg.get_bool("robust"); }
+
+const std::string& embree_isa(const SchemeConfig& cfg) { return cfg.get_choice("isa"); }
 
 EmbreeQuality embree_quality(const SchemeConfig& cfg) {
   const std::string& q = cfg.get_choice("quality");

@@ -3,7 +3,10 @@
 // (`--param quality=low|medium|high`), cached per scene and mode. Robust mode
 // (RTC_SCENE_FLAG_ROBUST) is the default so the baseline leaks no more than our watertight
 // kernels; `--param robust=0` gives Embree's fast default mode, the only one in which its HIGH
-// quality build makes spatial splits (Debian's Embree 3.13.5).
+// quality build makes spatial splits (Debian's Embree 3.13.5). `--param isa=...` (default:
+// Embree's own run-time choice, the best ISA the CPU has) is an explicit opt-in for like-for-like
+// comparisons across machines: an AVX-512 host runs avx512::BVH8Triangle4vIntersector1Pluecker
+// for embree_single, the AVX2 reference machine avx2:: (docs/PERFORMANCE.md, session 8).
 #pragma once
 #include <embree3/rtcore.h>
 
@@ -18,7 +21,8 @@ enum class EmbreeQuality { low, medium, high };
 
 class EmbreeScene {
  public:
-  EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust);
+  // isa: the device that builds it (embree_device: "default" or an ISA name).
+  EmbreeScene(const Scene& scene, EmbreeQuality quality, bool robust, const std::string& isa = "default");
   EmbreeScene(EmbreeScene&& o) noexcept : scene_(o.scene_), bytes_(o.bytes_) { o.scene_ = nullptr; }
   EmbreeScene(const EmbreeScene&) = delete;
   ~EmbreeScene();
@@ -33,14 +37,21 @@ class EmbreeScene {
   StructureBytes bytes_;
 };
 
-RTCDevice embree_device();
+// One device per ISA: "default" lets Embree pick the best ISA of the CPU; another name is passed as
+// Embree's device config `isa=NAME` after checking that the CPU has it (an unknown name makes
+// Embree 3.13.5 fall back to SSE2 silently, one the CPU lacks would fault at the first kernel),
+// InputError otherwise.
+RTCDevice embree_device(const std::string& isa = "default");
 std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, StructureCache& cache,
-                                                      EmbreeQuality quality, bool robust);
-// The three Embree schemes' parameters: `robust` (0|1) and `quality` (low|medium|high; only high
-// builds spatial splits, and only in fast mode, robust=0), and their values.
+                                                      EmbreeQuality quality, bool robust,
+                                                      const std::string& isa = "default");
+// The three Embree schemes' parameters: `robust` (0|1), `quality` (low|medium|high; only high
+// builds spatial splits, and only in fast mode, robust=0) and `isa` (default|sse2|sse4.2|avx|avx2|
+// avx512), and their values.
 ParamSpecs embree_param_specs();
 bool embree_robust(const SchemeConfig& cfg);
 EmbreeQuality embree_quality(const SchemeConfig& cfg);
+const std::string& embree_isa(const SchemeConfig& cfg);
 
 inline void to_embree(const Ray& r, RTCRayHit& rh) {
   rh.ray.org_x = r.org.x; rh.ray.org_y = r.org.y; rh.ray.org_z = r.org.z;
@@ -61,9 +72,10 @@ inline Hit from_embree(const RTCRayHit& rh) {
 template <class Derived>
 class EmbreeScheme : public TraverserBase<Derived> {
  public:
-  explicit EmbreeScheme(const SchemeConfig& cfg) : robust_(embree_robust(cfg)), quality_(embree_quality(cfg)) {}
+  explicit EmbreeScheme(const SchemeConfig& cfg)
+      : robust_(embree_robust(cfg)), quality_(embree_quality(cfg)), isa_(embree_isa(cfg)) {}
   void prepare(const Scene& scene, StructureCache& cache) override {
-    scene_ = fetch_embree_scene(scene, cache, quality_, robust_);
+    scene_ = fetch_embree_scene(scene, cache, quality_, robust_, isa_);
   }
   StructureBytes memory() const override { return scene_ ? scene_->bytes() : StructureBytes{}; }
 
@@ -77,6 +89,7 @@ class EmbreeScheme : public TraverserBase<Derived> {
   }
   bool robust_;
   EmbreeQuality quality_;
+  std::string isa_;
   std::shared_ptr<const EmbreeScene> scene_;
 };
 

@@ -52,14 +52,22 @@ struct RayCtx {
     // 1/(+-0) = +-inf (also for denormals under DAZ): the slab test below is NaN-aware.
     inv = {1.f / r.dir.x, 1.f / r.dir.y, 1.f / r.dir.z};
     near_x = std::signbit(inv.x), near_y = std::signbit(inv.y), near_z = std::signbit(inv.z);
-    Vec3 a{std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)};
-    kz = a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);
-    kx = kz == 2 ? 0 : kz + 1;
-    ky = kx == 2 ? 0 : kx + 1;
-    if (dir[kz] < 0.f) std::swap(kx, ky);  // keep the winding so backfaces are not culled
-    sx = dir[kx] / dir[kz];
-    sy = dir[ky] / dir[kz];
-    sz = 1.f / dir[kz];
+    // kz = the dominant axis (ties to the lower axis), kx, ky the next two in cyclic order, swapped
+    // when dir[kz] < 0 to keep the winding so backfaces are not culled. Without branches: a bounce
+    // ray's direction is random, and as branches these choices mispredicted 1.1 times per ray
+    // (callgrind --branch-sim, mbvh8_single, bounce:2 on the held-out-shaped scene of
+    // scripts/heldout_scene.py: 5.0 per ray in all; docs/PERFORMANCE.md, session 8).
+    const float d[3] = {dir.x, dir.y, dir.z};
+    const int xy = std::fabs(d[0]) >= std::fabs(d[1]), xz = std::fabs(d[0]) >= std::fabs(d[2]);
+    const int yz = std::fabs(d[1]) >= std::fabs(d[2]);
+    kz = 2 - 2 * (xy & xz) - ((xy ^ 1) & yz);
+    kx = (0b00'10'01 >> (2 * kz)) & 3;  // 1, 2, 0 for kz = 0, 1, 2
+    ky = (0b01'00'10 >> (2 * kz)) & 3;  // 2, 0, 1
+    const int swap = (kx ^ ky) & -int(d[kz] < 0.f);
+    kx ^= swap, ky ^= swap;
+    sx = d[kx] / d[kz];
+    sy = d[ky] / d[kz];
+    sz = 1.f / d[kz];
   }
 };
 

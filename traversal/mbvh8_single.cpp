@@ -10,9 +10,16 @@
 // Parameters: tri_width=4|8 (SSE or AVX2 triangle blocks), collapse=sah|greedy, merge (largest
 // leaf), tri_cost (block test vs node visit, %), small (0 | 4: 4-wide blocks for leaves of <= 4
 // triangles; default 0), leaf_size and bins (binary BVH).
-// The watertight 8-wide case runs mbvh_traverse (traversal/mbvh_traverse.h) with
-// ChildOrder::sort_always (child ordering without branching on the number of entered children);
-// the other kernels and tri_width=4 with the default branching order.
+// The watertight 8-wide case runs mbvh_traverse (traversal/mbvh_traverse.h) with the child order
+// of `order`: auto (default) takes ChildOrder::branching for common-origin batches (primary rays:
+// coherent, so the branches on the number of entered children predict well, and the nearest
+// child's address waits for no sort) and ChildOrder::sort_always (no such branches) otherwise
+// (bounce rays); sort and branching force one. Interleaved runs, ratio to embree_single, primary
+// 512x512, median of 3 (sort -> branching): sponza 0.81 -> 1.09, conference 1.23 -> 1.40,
+// dragon_100k 1.11 -> 1.33, stadium 1.02 -> 1.11, the held-out-shaped scene 1.19 -> 1.35; on
+// bounce:2 branching was 2-6% behind sort (docs/PERFORMANCE.md, session 8). The hint is the one
+// the Embree baselines pass as RTC_INTERSECT_CONTEXT_FLAG_COHERENT. The other kernels and
+// tri_width=4 always take the branching order.
 #include "traversal/mbvh_traverse.h"
 #include "traversal/mbvh_fetch.h"
 
@@ -24,20 +31,30 @@ constexpr MBVHDefaults kDefaults = kMBVH8Defaults;
 class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHData<8, 8>> {
  public:
   // tri_width=4: layout 0, 8: layout 1.
-  explicit MBVH8Single(const SchemeConfig& cfg) : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1) {}
+  explicit MBVH8Single(const SchemeConfig& cfg)
+      : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1), order_(cfg.get_choice("order")) {}
   std::string_view name() const override { return "mbvh8_single"; }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    const bool sort = order_ == "sort" || (order_ == "auto" && !batch.common_origin);
     dispatch_kernel(cfg_.kernel, [&](auto k) {
       data_.visit([&](const auto& d) {
         constexpr TriKernel K = decltype(k)::value;
         constexpr int W = std::decay_t<decltype(d)>::kW;
-        constexpr ChildOrder O = W == 8 && K == TriKernel::watertight ? ChildOrder::sort_always : ChildOrder::branching;
-        mbvh_trace_rays<8, W, K, O>(d, batch, range, hits, probe);
+        if constexpr (W == 8 && K == TriKernel::watertight) {
+          if (sort) {
+            mbvh_trace_rays<8, W, K, ChildOrder::sort_always>(d, batch, range, hits, probe);
+            return;
+          }
+        }
+        mbvh_trace_rays<8, W, K, ChildOrder::branching>(d, batch, range, hits, probe);
       });
     });
   }
+
+ private:
+  std::string order_;
 };
 
 }  // namespace
@@ -45,7 +62,10 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
 std::unique_ptr<Traverser> make_mbvh8_single(const SchemeConfig& cfg) { return std::make_unique<MBVH8Single>(cfg); }
 ParamSpecs params_mbvh8_single() {
   return mbvh_param_specs(kDefaults) +
-         ParamSpecs{int_choice_param("tri_width", 8, {4, 8}, "triangles per leaf block: 4 (SSE) or 8 (AVX2)")};
+         ParamSpecs{int_choice_param("tri_width", 8, {4, 8}, "triangles per leaf block: 4 (SSE) or 8 (AVX2)"),
+                    choice_param("order", "auto", {"auto", "sort", "branching"},
+                                 "child order (ChildOrder, watertight 8-wide blocks): sort = sort_always, branching, "
+                                 "auto = branching for common-origin batches, sort_always otherwise")};
 }
 
 }  // namespace tb

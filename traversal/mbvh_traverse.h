@@ -135,29 +135,41 @@ template <int N>
   return slab<N, true>(xn, xf, rn, rf, r.tmin, S::set1(tfar), tn_out);
 }
 
-// Per-ray constants of the W-wide watertight test: RayCtx's shear, broadcast.
+// Per-ray constants of the W-wide watertight test: RayCtx's shear, broadcast. An 8-wide one also
+// serves the 4-wide blocks of small leaves through the low halves of its vectors (lanes_of): it
+// used to carry a 4-wide copy, built for every ray whether or not a small leaf came (by default
+// none does, small=0), and the origin was picked with Vec3's branching operator[]: ~45
+// instructions of the per-ray setup (callgrind, mbvh8_single bounce:2, held-out-shaped scene:
+// docs/PERFORMANCE.md, session 8).
 template <int W>
 struct TriRay {
   using f = typename simd::V<W>::f;
-  struct NoHalf {};
   f ox, oy, oz;  // origin, permuted (kx, ky, kz)
   f sx, sy, sz;
   Vec3 org, dir;
   float tmin, szs;
   uint32_t kx, ky, kz;
-  // 8 wide: the 4-wide constants for the small leaves.
-  [[no_unique_address]] std::conditional_t<W == 8, TriRay<4>, NoHalf> half;
   TriRay() = default;
   TriRay(const RayCtx& rc, float t0) : TriRay(rc.org, rc.dir, rc.kx, rc.ky, rc.kz, rc.sx, rc.sy, rc.sz, t0) {}
   TriRay(Vec3 o, Vec3 d, int kx_, int ky_, int kz_, float sx_, float sy_, float sz_, float t0) {
     using S = simd::V<W>;
     kx = uint32_t(kx_), ky = uint32_t(ky_), kz = uint32_t(kz_);
-    ox = S::set1(o[kx_]), oy = S::set1(o[ky_]), oz = S::set1(o[kz_]);
+    const float oa[3] = {o.x, o.y, o.z};
+    ox = S::set1(oa[kx_]), oy = S::set1(oa[ky_]), oz = S::set1(oa[kz_]);
     sx = S::set1(sx_), sy = S::set1(sy_), sz = S::set1(sz_);
     org = o, dir = d, tmin = t0, szs = sz_;
-    if constexpr (W == 8) half = TriRay<4>(o, d, kx_, ky_, kz_, sx_, sy_, sz_, t0);
   }
 };
+// The W lanes of a broadcast ray constant of a TriRay<RW> (RW >= W: every lane holds the same value).
+template <int W, int RW>
+[[gnu::always_inline]] inline typename simd::V<W>::f lanes_of(const typename simd::V<RW>::f& x) {
+  if constexpr (W == RW) {
+    return x;
+  } else {
+    static_assert(W == 4 && RW == 8);
+    return _mm256_castps256_ps128(x);
+  }
+}
 
 // The real triangles of block k of a leaf of ntris triangles in W-wide blocks (the last block pads
 // with copies of the leaf's last triangle), and the low n bits set: those lanes.
@@ -174,19 +186,22 @@ constexpr uint32_t lane_bits(uint32_t n) { return (1u << n) - 1; }
 // once per copy (issue 17). The padding lanes are masked only once some lane passes the edge
 // test: most blocks are missed by every lane, and building the mask before the test cost ~3
 // instructions per block (callgrind, mbvh4_single sponza primary: 1.0 M of 59.6 M).
-template <int W>
-[[gnu::noinline]] inline bool block_intersect(const TriRay<W>& r, const TriBlock<W>& b, Hit& hit, uint32_t tris) {
+// The ray's constants may come from a wider TriRay (RW = 8 for the 4-wide small-leaf blocks).
+template <int W, int RW = W>
+[[gnu::noinline]] inline bool block_intersect(const TriRay<RW>& r, const TriBlock<W>& b, Hit& hit, uint32_t tris) {
   using S = simd::V<W>;
   using f = typename S::f;
-  const f Az = S::sub(S::load(b.v[0][r.kz]), r.oz);
-  const f Bz = S::sub(S::load(b.v[1][r.kz]), r.oz);
-  const f Cz = S::sub(S::load(b.v[2][r.kz]), r.oz);
-  const f Ax = shear<W>(S::sub(S::load(b.v[0][r.kx]), r.ox), r.sx, Az);
-  const f Ay = shear<W>(S::sub(S::load(b.v[0][r.ky]), r.oy), r.sy, Az);
-  const f Bx = shear<W>(S::sub(S::load(b.v[1][r.kx]), r.ox), r.sx, Bz);
-  const f By = shear<W>(S::sub(S::load(b.v[1][r.ky]), r.oy), r.sy, Bz);
-  const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), r.ox), r.sx, Cz);
-  const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), r.oy), r.sy, Cz);
+  const f ox = lanes_of<W, RW>(r.ox), oy = lanes_of<W, RW>(r.oy), oz = lanes_of<W, RW>(r.oz);
+  const f sx = lanes_of<W, RW>(r.sx), sy = lanes_of<W, RW>(r.sy);
+  const f Az = S::sub(S::load(b.v[0][r.kz]), oz);
+  const f Bz = S::sub(S::load(b.v[1][r.kz]), oz);
+  const f Cz = S::sub(S::load(b.v[2][r.kz]), oz);
+  const f Ax = shear<W>(S::sub(S::load(b.v[0][r.kx]), ox), sx, Az);
+  const f Ay = shear<W>(S::sub(S::load(b.v[0][r.ky]), oy), sy, Az);
+  const f Bx = shear<W>(S::sub(S::load(b.v[1][r.kx]), ox), sx, Bz);
+  const f By = shear<W>(S::sub(S::load(b.v[1][r.ky]), oy), sy, Bz);
+  const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), ox), sx, Cz);
+  const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), oy), sy, Cz);
   f U, Vv, Ww, det;
   int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return false;
@@ -258,7 +273,7 @@ inline void leaf_test(const MBVH<N, W>& m, const TriangleSet* ts, const TriRay<W
   if constexpr (W == 8) {
     if (ntris <= m.small_leaf) {
       if constexpr (K == TriKernel::watertight) {
-        block_intersect<4>(tr.half, m.small[first], hit, ntris);
+        block_intersect<4, W>(tr, m.small[first], hit, ntris);
       } else {
         for (uint32_t l = 0; l < ntris; ++l) intersect_tri<K>(*rc, *ts, m.small_lane(first, l), tr.tmin, hit);
       }
@@ -371,7 +386,9 @@ inline uint32_t min_key8(__m256i k) {
 //    embree_single): +4 to +13% over `branching` for mbvh8_single (8-wide blocks, watertight) on
 //    the nine scenes of /work/shared/scenes (docs/PERFORMANCE.md). The "sort always" child
 //    ordering discussed by Wald et al. (2008) and Ernst & Greiner (2008) for 4-wide nodes, with the
-//    keys of thesis Alg. 2.10.
+//    keys of thesis Alg. 2.10. On coherent (primary) rays `branching` is the faster one: its
+//    branches predict well there and the next node's address waits for no key reduction
+//    (mbvh8_single's `order=auto` picks per batch; docs/PERFORMANCE.md, session 8).
 enum class ChildOrder { branching, sort_always };
 
 // Where a suspended traversal resumes: the reference it visits next and its pending-stack depth.

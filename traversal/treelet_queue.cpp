@@ -15,8 +15,8 @@
 // default pool holds a whole 65536-ray chunk: on crytek_sponza_partial 512x512 bounce:2 8192 rays
 // gave 8.4 simulated memory reads per ray, 65536 6.5 (docs/PERFORMANCE.md, Bandwidth).
 // Because a ray is only suspended between two visits and resumes with the same stack, it visits
-// exactly the nodes and leaves mbvh8_single visits, in the same order: its hits are
-// bit-identical (tested).
+// exactly the nodes and leaves mbvh8_single visits with `order=sort` (its order for all but
+// common-origin batches), in the same order: its hits are bit-identical (tested).
 //
 // Statistics (`run --stats`, from the instrumented traces): treelet_rays_per_visit (rays run per
 // queue taken), treelet_queues_nonempty (non-empty queues when the scheduler takes one),
