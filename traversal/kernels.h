@@ -57,14 +57,16 @@ struct RayCtx {
     // ray's direction is random, and as branches these choices mispredicted 1.1 times per ray
     // (callgrind --branch-sim, mbvh8_single, bounce:2 on the held-out-shaped scene of
     // scripts/heldout_scene.py: 5.0 per ray in all; docs/PERFORMANCE.md, session 8).
+    // Two small tables: kz by the three comparisons (|x| >= |y|, |x| >= |z|, |y| >= |z| as bits
+    // 0..2), then (kx, ky) by kz and the sign of dir[kz]. An arithmetic version (2-bit shifts, an
+    // xor swap) took ~20 instructions more per ray (callgrind: mbvh4_single +1.1%).
+    static constexpr int8_t kDominant[8] = {2, 2, 2, 0, 1, 2, 1, 0};
+    static constexpr int8_t kCross[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
     const float d[3] = {dir.x, dir.y, dir.z};
-    const int xy = std::fabs(d[0]) >= std::fabs(d[1]), xz = std::fabs(d[0]) >= std::fabs(d[2]);
-    const int yz = std::fabs(d[1]) >= std::fabs(d[2]);
-    kz = 2 - 2 * (xy & xz) - ((xy ^ 1) & yz);
-    kx = (0b00'10'01 >> (2 * kz)) & 3;  // 1, 2, 0 for kz = 0, 1, 2
-    ky = (0b01'00'10 >> (2 * kz)) & 3;  // 2, 0, 1
-    const int swap = (kx ^ ky) & -int(d[kz] < 0.f);
-    kx ^= swap, ky ^= swap;
+    const float ax = std::fabs(d[0]), ay = std::fabs(d[1]), az = std::fabs(d[2]);
+    kz = kDominant[int(ax >= ay) | int(ax >= az) << 1 | int(ay >= az) << 2];
+    const int neg = d[kz] < 0.f;
+    kx = kCross[kz][neg][0], ky = kCross[kz][neg][1];
     sx = d[kx] / d[kz];
     sy = d[ky] / d[kz];
     sz = 1.f / d[kz];
