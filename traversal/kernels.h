@@ -52,24 +52,19 @@ struct RayCtx {
     // 1/(+-0) = +-inf (also for denormals under DAZ): the slab test below is NaN-aware.
     inv = {1.f / r.dir.x, 1.f / r.dir.y, 1.f / r.dir.z};
     near_x = std::signbit(inv.x), near_y = std::signbit(inv.y), near_z = std::signbit(inv.z);
-    // kz = the dominant axis (ties to the lower axis), kx, ky the next two in cyclic order, swapped
-    // when dir[kz] < 0 to keep the winding so backfaces are not culled. Without branches: a bounce
-    // ray's direction is random, and as branches these choices mispredicted 1.1 times per ray
-    // (callgrind --branch-sim, mbvh8_single, bounce:2 on the held-out-shaped scene of
-    // scripts/heldout_scene.py: 5.0 per ray in all; docs/PERFORMANCE.md, session 8).
-    // Two small tables: kz by the three comparisons (|x| >= |y|, |x| >= |z|, |y| >= |z| as bits
-    // 0..2), then (kx, ky) by kz and the sign of dir[kz]. An arithmetic version (2-bit shifts, an
-    // xor swap) took ~20 instructions more per ray (callgrind: mbvh4_single +1.1%).
-    static constexpr int8_t kDominant[8] = {2, 2, 2, 0, 1, 2, 1, 0};
-    static constexpr int8_t kCross[3][2][2] = {{{1, 2}, {2, 1}}, {{2, 0}, {0, 2}}, {{0, 1}, {1, 0}}};
-    const float d[3] = {dir.x, dir.y, dir.z};
-    const float ax = std::fabs(d[0]), ay = std::fabs(d[1]), az = std::fabs(d[2]);
-    kz = kDominant[int(ax >= ay) | int(ax >= az) << 1 | int(ay >= az) << 2];
-    const int neg = d[kz] < 0.f;
-    kx = kCross[kz][neg][0], ky = kCross[kz][neg][1];
-    sx = d[kx] / d[kz];
-    sy = d[ky] / d[kz];
-    sz = 1.f / d[kz];
+    // The shear axes by branches. Session 8 tried two small tables instead (no branches: a bounce
+    // ray's random direction mispredicted these 1.1 times per ray in callgrind's model): they
+    // lengthen the chain to the divisions below, and primary rays, whose branches predict, paid
+    // for it: dragon_100k primary, interleaved A/B against 984423f, bvh_ranged 0.924, mbvh4_single
+    // 0.943, bvh_single 0.956 (docs/PERFORMANCE.md, session 8); reverted.
+    Vec3 a{std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)};
+    kz = a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);
+    kx = kz == 2 ? 0 : kz + 1;
+    ky = kx == 2 ? 0 : kx + 1;
+    if (dir[kz] < 0.f) std::swap(kx, ky);  // keep the winding so backfaces are not culled
+    sx = dir[kx] / dir[kz];
+    sy = dir[ky] / dir[kz];
+    sz = 1.f / dir[kz];
   }
 };
 
