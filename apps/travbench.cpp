@@ -170,6 +170,12 @@ int main(int argc, char** argv) {
     c->add_option("--height", ro.height, "image height for camera workloads")->check(CLI::Range(16, 16384));
     c->add_option("--seed", ro.seed, "workload seed")->check(kSeed);
   };
+  auto add_cache = [&](CLI::App* c, const char* flag_doc) {  // the cache simulator's columns
+    auto* flag = c->add_flag("--cache", ro.cache, flag_doc);
+    c->add_option("--cache-config", ro.cache_config, "with --cache: cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")
+        ->check(kCacheConfig)->needs(flag);
+    c->add_option("--cache-policy", ro.cache_policy, "with --cache: lru | plru | bitplru")->check(kPolicy)->needs(flag);
+  };
   auto add_common = [&](CLI::App* c) {
     add_scene(c);
     c->add_option("--schemes", schemes_arg, "comma-separated scheme names or 'all'")->check(kSchemes);
@@ -184,9 +190,7 @@ int main(int argc, char** argv) {
   run->add_option("--workloads", workloads_arg, "comma-separated workloads, e.g. primary,bounce:2")->check(kWorkloads);
   run->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
   run->add_flag("--stats", ro.stats, "add node/leaf/triangle counts per ray and rays per visited node");
-  run->add_flag("--cache", ro.cache, "add simulated L1/L2/L3 hits, memory accesses and estimated cycles");
-  run->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
-  run->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru")->check(kPolicy);
+  add_cache(run, "add simulated L1/L2/L3 hits, memory accesses and estimated cycles");
   run->get_option("--csv")->required();
   bool resume = false;
   run->add_flag("--resume", resume,
@@ -210,10 +214,11 @@ int main(int argc, char** argv) {
   // Every ray one path-traced frame traces (harness/pathtrace.h), so a scheme, the cache simulator
   // or callgrind can replay a frame (scripts/pathtrace_reads.sh); the frame is rendered with the
   // reference traverser, and stdout gets the rays per iteration and kind as CSV.
-  rays->add_option("--pathtrace", pt_method, "instead of --workload: one frame of this path tracer (Ref, PR, DPT, ...)")
-      ->check(checked_by("METHOD", [](const std::string& v) { parse_pt_method(v); }))
-      ->excludes(rays_workload);
-  rays->add_option("--spp", pt_spp, "samples per pixel of --pathtrace")->check(CLI::Range(1, 4096));
+  auto* rays_pt = rays->add_option("--pathtrace", pt_method,
+                                    "instead of --workload: one frame of this path tracer (Ref, PR, DPT, ...)")
+                      ->check(checked_by("METHOD", [](const std::string& v) { parse_pt_method(v); }))
+                      ->excludes(rays_workload);
+  rays->add_option("--spp", pt_spp, "samples per pixel of --pathtrace")->check(CLI::Range(1, 4096))->needs(rays_pt);
   rays->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
   rays->add_option("--out", rays_out, "ray file to write")->required()->check(kOutputFile);
 
@@ -225,9 +230,7 @@ int main(int argc, char** argv) {
   trace->add_option("--scheme", scheme_arg, "scheme name")->required()->check(kScheme);
   trace->add_option("--rays", rays_in, "ray file to read")->required();
   trace->add_option("--hits", hits_out, "hit file to write")->check(kOutputFile);
-  trace->add_flag("--cache", ro.cache, "with --csv: add run's simulated cache columns (one instrumented trace)");
-  trace->add_option("--cache-config", ro.cache_config, "cache levels, e.g. l1=32K:8,l2=256K:8,l3=2M:16")->check(kCacheConfig);
-  trace->add_option("--cache-policy", ro.cache_policy, "lru | plru | bitplru")->check(kPolicy);
+  add_cache(trace, "with --csv: add run's simulated cache columns (one instrumented trace)");
 
   ImageOptions io;
   auto* image = app.add_subcommand("image", "Per-pixel heat map of one scheme's traversal cost on a workload -> PNG");
@@ -351,8 +354,7 @@ int main(int argc, char** argv) {
       std::printf("iteration,kind,rays,packets\n");
       for (const RayBatch& b : traced) {
         std::printf("%u,%s,%zu,%u\n", b.depth, b.workload.c_str(), b.size(), b.num_packets());
-        for (uint32_t p = 0; p < b.num_packets(); ++p) all.packet_begin.push_back(all.packet_begin.back() + b.packet_rays(p));
-        all.rays.insert(all.rays.end(), b.rays.begin(), b.rays.end());
+        all.append(b);
       }
       write_rays(rays_out, all);
       return 0;

@@ -189,6 +189,11 @@ TEST_F(BadInput, OptionValuesAreValidatedAndNamed) {
       {"list params warp_drive", {"warp_drive"}},
       {"run --scene room --cache --cache-config l1=33K:8" + csv, {"--cache-config", "power of two"}},
       {"run --scene room --cache --cache-policy fifo" + csv, {"--cache-policy", "fifo"}},
+      // Options that only mean something with another: refused without it, never ignored.
+      {"run --scene room --cache-config l1=32K:8" + csv, {"--cache-config", "--cache"}},
+      {"trace --scene room --scheme bvh_single --rays x --cache-policy lru --csv " + path("t.csv"),
+       {"--cache-policy", "--cache"}},
+      {"rays --scene room --workload primary --spp 4 --out " + path("r.bin"), {"--spp", "--pathtrace"}},
       {"cachesim --config l1=32K:8,l2=100K:8 --trace -", {"--config", "power of two"}},
       {"cachesim --config l1=32K:8:48 --trace -", {"--config", "line size"}},
       {"cachesim --config l1=32K:3 --trace -", {"--config", "associativity"}},

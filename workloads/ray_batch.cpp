@@ -13,6 +13,14 @@ void RayBatch::group_uniform(uint32_t n) {
   packet_begin.push_back(uint32_t(rays.size()));
 }
 
+void RayBatch::append(const RayBatch& b) {
+  const uint32_t base = uint32_t(rays.size());
+  rays.insert(rays.end(), b.rays.begin(), b.rays.end());
+  for (size_t p = 1; p < b.packet_begin.size(); ++p) packet_begin.push_back(base + b.packet_begin[p]);
+  pixel.clear();
+  common_origin = false;
+}
+
 void RayBatch::validate() const {
   if (packet_begin.empty() || packet_begin.front() != 0 || packet_begin.back() != rays.size())
     throw InputError("ray batch: packet table does not cover the rays");

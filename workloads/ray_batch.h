@@ -48,6 +48,9 @@ struct RayBatch {
   uint32_t packet_rays(uint32_t p) const { return packet_begin[p + 1] - packet_begin[p]; }
   // Regroups into uniform packets of `n` rays (the last one may be short).
   void group_uniform(uint32_t n);
+  // Appends b's rays after these, b's packets kept as packets of their own. The result is a ray
+  // file's batch, not one camera image: pixels are dropped and common_origin cleared.
+  void append(const RayBatch& b);
   // Rejects NaN/Inf and zero directions with an InputError naming the first bad ray.
   void validate() const;
 };
