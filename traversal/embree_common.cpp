@@ -51,8 +51,11 @@ RTCDevice embree_device(const std::string& isa) {
   if (auto it = devices.find(isa); it != devices.end()) return it->second;
   std::string config = "threads=1,set_affinity=0";
   if (isa != "default") {
-    if (std::find(kIsaNames.begin(), kIsaNames.end(), isa) == kIsaNames.end())
-      throw InputError("embree isa '" + isa + "': not one of default, sse2, sse4.2, avx, avx2, avx512");
+    if (std::find(kIsaNames.begin(), kIsaNames.end(), isa) == kIsaNames.end()) {
+      std::string names;
+      for (const std::string& n : kIsaNames) names += (names.empty() ? "" : ", ") + n;
+      throw InputError("embree isa '" + isa + "': not one of " + names);
+    }
     if (!cpu_has_isa(isa)) throw InputError("embree isa '" + isa + "': this CPU does not support it");
     config += ",isa=" + isa;
   }
