@@ -53,17 +53,8 @@ namespace tb {
 
 // Byte offsets in a node of the quantized rows holding the near (0..2) and far (3..5) planes of each
 // axis, by ray octant (bit a set: direction a negative, entered through hi; Williams et al. 2005).
-inline constexpr std::array<std::array<uint32_t, 6>, 8> kCWPlaneRows = [] {
-  std::array<std::array<uint32_t, 6>, 8> t{};
-  for (int o = 0; o < 8; ++o)
-    for (int a = 0; a < 3; ++a) {
-      const uint32_t lo = uint32_t(offsetof(CWNode, qlo)) + 8u * uint32_t(a);
-      const uint32_t hi = uint32_t(offsetof(CWNode, qhi)) + 8u * uint32_t(a);
-      t[o][a] = (o >> a & 1) ? hi : lo;
-      t[o][3 + a] = (o >> a & 1) ? lo : hi;
-    }
-  return t;
-}();
+inline constexpr std::array<std::array<uint32_t, 6>, 8> kCWPlaneRows =
+    octant_plane_rows(uint32_t(offsetof(CWNode, qlo)), uint32_t(offsetof(CWNode, qhi)), 8);
 
 // Per-ray constants of the fused node test, broadcast per axis: r, c_near and c_far (an axis left
 // out has r = NaN, c = 0), tmin, and the plane rows of the ray's octant. Computed for the three

@@ -22,6 +22,7 @@
 #pragma once
 #include <immintrin.h>
 
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -67,6 +68,21 @@ struct RayCtx {
     sz = 1.f / dir[kz];
   }
 };
+
+// Where a node layout keeps the near (0..2) and far (3..5) plane row of each axis, by ray octant
+// (bit a set: direction a negative, entered through hi; Williams et al. 2005 sign-selected slabs):
+// the rows of axis a sit at lo + a * step and hi + a * step, in whatever unit the layout indexes
+// by (floats of an MBVH node, bytes of a CWBVH node).
+constexpr std::array<std::array<uint32_t, 6>, 8> octant_plane_rows(uint32_t lo, uint32_t hi, uint32_t step) {
+  std::array<std::array<uint32_t, 6>, 8> t{};
+  for (uint32_t o = 0; o < 8; ++o)
+    for (uint32_t a = 0; a < 3; ++a) {
+      const bool neg = (o >> a) & 1;
+      t[o][a] = (neg ? hi : lo) + a * step;
+      t[o][3 + a] = (neg ? lo : hi) + a * step;
+    }
+  return t;
+}
 
 // =============================================================================================
 // Conservative slab test (Williams et al. 2005 sign-selected slabs, Ize 2013 padding), L lanes.

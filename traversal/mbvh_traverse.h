@@ -76,20 +76,13 @@ inline __m256i sort8(__m256i k) {
 
 // Float offsets into MBVHNode<N>::box of the near (0..2) and far (3..5) plane row of each axis,
 // by ray octant (bit a set: direction a negative, entered through hi). A per-ray pointer into this
-// table replaces six per-ray offsets: g++ 12 kept those in stack slots anyway, loaded at every
-// node, so the node test is unchanged and the ray setup saves their computation and stores
-// (callgrind, dragon_100k primary 128x128: docs/PERFORMANCE.md, session 7).
+// table replaces six per-ray offsets: in the 8-wide loop g++ 12 kept those in stack slots anyway,
+// loaded at every node, so the node test is unchanged and the ray setup saves their computation
+// and stores (callgrind, dragon_100k primary 128x128: docs/PERFORMANCE.md, session 7). The 4-wide
+// loop had kept them in registers and now loads them at every node (+23% data reads, ~3% slower
+// on primary rays: docs/PERFORMANCE.md, session 8).
 template <int N>
-inline constexpr std::array<std::array<uint32_t, 6>, 8> kPlaneRows = [] {
-  std::array<std::array<uint32_t, 6>, 8> t{};
-  for (int o = 0; o < 8; ++o)
-    for (int a = 0; a < 3; ++a) {
-      const bool neg = (o >> a) & 1;
-      t[o][a] = uint32_t(((neg ? 3 : 0) + a) * N);
-      t[o][3 + a] = uint32_t(((neg ? 0 : 3) + a) * N);
-    }
-  return t;
-}();
+inline constexpr std::array<std::array<uint32_t, 6>, 8> kPlaneRows = octant_plane_rows(0, 3 * N, N);
 
 // Per-ray constants of the N-wide box test: origin, reciprocal direction, the reciprocal padded
 // for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
