@@ -21,7 +21,7 @@ class MBVH4Single final : public MBVHScheme<MBVH4Single, MBVHData<4, 4>> {
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const MBVHData<4, 4>& d = std::get<0>(data_.data);
-    dispatch_kernel(cfg_.kernel, [&](auto k) { mbvh_trace_rays<4, 4, decltype(k)::value>(d, batch, range, hits, probe); });
+    dispatch_kernel(cfg_.kernel, [&](auto k) { mbvh_trace_rays<4, 4, decltype(k)::value, ChildOrder::branching, true>(d, batch, range, hits, probe); });
   }
 };
 

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <span>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "structures/mbvh.h"
@@ -99,6 +100,7 @@ struct NodeRay {
   using f = typename simd::V<N>::f;
   f nox, noy, noz, ix, iy, iz, fx, fy, fz, tmin;  // nox = -org.x
   const uint32_t* rows;  // kPlaneRows<N> of the ray's octant
+  uint32_t octant;       // bit a set: direction a negative
   NodeRay(const RayCtx& rc, float t0) { init(rc.org, rc.inv, t0); }
   NodeRay(Vec3 org, Vec3 inv, float t0) { init(org, inv, t0); }
   void init(Vec3 org, Vec3 inv, float t0) {
@@ -107,19 +109,26 @@ struct NodeRay {
     ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
     fx = S::set1(inv.x * kFarPad), fy = S::set1(inv.y * kFarPad), fz = S::set1(inv.z * kFarPad);
     tmin = S::set1(t0);
-    rows = kPlaneRows<N>[int(std::signbit(inv.x)) | int(std::signbit(inv.y)) << 1 | int(std::signbit(inv.z)) << 2].data();
+    octant = uint32_t(std::signbit(inv.x)) | uint32_t(std::signbit(inv.y)) << 1 | uint32_t(std::signbit(inv.z)) << 2;
+    rows = kPlaneRows<N>[octant].data();
   }
 };
+
+// The ray octant a traversal loop is compiled for: kAnyOctant reads the plane rows through
+// NodeRay::rows; 0..7 makes them constants of the loop (mbvh_trace_rays' kPerOctant).
+inline constexpr int kAnyOctant = -1;
 
 // Entry distances `tn` of the N children and the lanes the ray enters before `tfar` (all-ones
 // lanes; movemask gives the bits): the kernel library's slab test on N lanes, one lane per child,
 // with the far reciprocal padded per ray (kPadRcp), plane - origin taken as NodeRay explains.
-template <int N>
+// Oct (0..7, the ray's octant) fixes the plane rows at compile time: every load then has a
+// constant offset and folds into its vaddps.
+template <int N, int Oct = kAnyOctant>
 [[gnu::always_inline]] inline typename simd::V<N>::f box_test(const MBVHNode<N>& nd, const NodeRay<N>& r, float tfar,
                                                               typename simd::V<N>::f& tn_out) {
   using S = simd::V<N>;
   const float* b = &nd.box[0][0];
-  const uint32_t* row = r.rows;
+  const uint32_t* row = Oct == kAnyOctant ? r.rows : kPlaneRows<N>[Oct].data();
   const typename S::f xn[3] = {S::add(r.nox, S::load(b + row[0])), S::add(r.noy, S::load(b + row[1])),
                                S::add(r.noz, S::load(b + row[2]))};
   const typename S::f xf[3] = {S::add(r.nox, S::load(b + row[3])), S::add(r.noy, S::load(b + row[4])),
@@ -409,7 +418,7 @@ struct NeverLeave {
 // mbvh8_single 57.07 M -> 54.24 M, treelet_queue 114.5 M -> 100.0 M; raygrid 67.3 M -> 69.8 M,
 // mbvh_rs unchanged. Wrapping the forced loop in a noinline function instead measured in between
 // (61.2-61.5 M for mbvh4_single): register allocation, not the call, decides it.
-template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P, class Leave>
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, int Oct = kAnyOctant, class P, class Leave>
 inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
                                const RayCtx* rc, MBVHCursor& at, Hit& hit, MBVHStackEntry* stack, P& probe,
                                Leave&& leave) {
@@ -426,7 +435,7 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
       const MBVHNode<N>& nd = nodes[cur];
       probe.node(&nd, sizeof(nd));
       typename S::f tn;
-      const auto entered = box_test<N>(nd, nr, tfar, tn);
+      const auto entered = box_test<N, Oct>(nd, nr, tfar, tn);
       int mask = S::mask(entered);
       if constexpr (O == ChildOrder::sort_always) {
         static_assert(N == 8, "sort_always needs the 8-wide key reduction");
@@ -476,23 +485,42 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
     if (!pop_pending(stack, sp, tfar, cur, probe)) return true;
   }
 }
-template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, int Oct = kAnyOctant, class P>
 inline void mbvh_traverse(const MBVH<N, W>& m, const TriangleSet* ts, const NodeRay<N>& nr, const TriRay<W>& tr,
                           const RayCtx* rc, uint32_t start, Hit& hit, MBVHStackEntry* stack, P& probe) {
   MBVHCursor at{start, 0};
-  mbvh_traverse_from<N, W, K, O>(m, ts, nr, tr, rc, at, hit, stack, probe, NeverLeave{});
+  mbvh_traverse_from<N, W, K, O, Oct>(m, ts, nr, tr, rc, at, hit, stack, probe, NeverLeave{});
+}
+
+// Calls f(std::integral_constant<int, octant>{}): a runtime octant (0..7) as a template argument.
+template <class F>
+[[gnu::always_inline]] inline void with_octant(uint32_t octant, F&& f) {
+  [&]<int... O>(std::integer_sequence<int, O...>) {
+    (void)((octant == uint32_t(O) && (f(std::integral_constant<int, O>{}), true)) || ...);
+  }(std::make_integer_sequence<int, 8>{});
 }
 
 // Single-ray traversal of the rays of `range` (mbvh4_single, mbvh8_single): the timed loop.
-template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, class P>
+// kPerOctant compiles the traversal loop once per ray octant, so the node test's plane rows are
+// constants (box_test's Oct) instead of six loads per node through NodeRay::rows: in the 4-wide
+// loop g++ 12 cannot keep six per-ray offsets in registers (OLD 984423f did, with fewer live
+// values; session 8 measured +23% data reads and ~3% slower primary rays without them).
+template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, bool kPerOctant = false, class P>
 void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                      P& probe) {
   const MBVH<N, W>& m = *d.mbvh;
   std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
   for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
     const RayCtx rc(ray);
-    mbvh_traverse<N, W, K, O>(m, d.tris.get(), NodeRay<N>(rc, ray.tmin), TriRay<W>(rc, ray.tmin), &rc, 0, hit,
-                              stack.data(), probe);
+    const NodeRay<N> nr(rc, ray.tmin);
+    const TriRay<W> tr(rc, ray.tmin);
+    if constexpr (kPerOctant) {
+      with_octant(nr.octant, [&](auto oct) {
+        mbvh_traverse<N, W, K, O, decltype(oct)::value>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack.data(), probe);
+      });
+    } else {
+      mbvh_traverse<N, W, K, O>(m, d.tris.get(), nr, tr, &rc, 0, hit, stack.data(), probe);
+    }
   });
 }
 

@@ -43,7 +43,7 @@ inline float hmin3(__m128 v) {
 }
 
 // True when no ray of the packet can enter the node's box (early miss, Alg. 2.6 line 4).
-inline bool ia_misses(const IABounds& b, const BVHNode& n) {
+[[gnu::always_inline]] inline bool ia_misses(const IABounds& b, const BVHNode& n) {
   const __m128 lo = _mm_loadu_ps(&n.lo.x), hi = _mm_loadu_ps(&n.hi.x);
   const __m128 pn = _mm_blendv_ps(lo, hi, b.neg), pf = _mm_blendv_ps(hi, lo, b.neg);
   const __m128 zero = _mm_setzero_ps();

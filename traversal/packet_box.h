@@ -132,7 +132,7 @@ struct NodeTester {
       });
     }
   }
-  uint32_t operator()(uint32_t g) const {
+  [[gnu::always_inline]] uint32_t operator()(uint32_t g) const {
     if (!pre) {
       if constexpr (kHoistPlanes) return group_box<kCommon>(p, g, n, planes.v, planes.v + 3);
       const __m256 L[3] = {_mm256_set1_ps(n.lo.x), _mm256_set1_ps(n.lo.y), _mm256_set1_ps(n.lo.z)};
