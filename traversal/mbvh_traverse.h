@@ -80,8 +80,9 @@ inline __m256i sort8(__m256i k) {
 // table replaces six per-ray offsets: in the 8-wide loop g++ 12 kept those in stack slots anyway,
 // loaded at every node, so the node test is unchanged and the ray setup saves their computation
 // and stores (callgrind, dragon_100k primary 128x128: docs/PERFORMANCE.md, session 7). The 4-wide
-// loop had kept them in registers and now loads them at every node (+23% data reads, ~3% slower
-// on primary rays: docs/PERFORMANCE.md, session 8).
+// loop had kept them in registers and loaded them at every node through the pointer (+23% data
+// reads, ~3% slower on primary rays: docs/PERFORMANCE.md, session 8), so mbvh4_single compiles
+// its loop once per octant (mbvh_trace_rays' kPerOctant), where the rows are constants.
 template <int N>
 inline constexpr std::array<std::array<uint32_t, 6>, 8> kPlaneRows = octant_plane_rows(0, 3 * N, N);
 
@@ -504,7 +505,11 @@ template <class F>
 // kPerOctant compiles the traversal loop once per ray octant, so the node test's plane rows are
 // constants (box_test's Oct) instead of six loads per node through NodeRay::rows: in the 4-wide
 // loop g++ 12 cannot keep six per-ray offsets in registers (OLD 984423f did, with fewer live
-// values; session 8 measured +23% data reads and ~3% slower primary rays without them).
+// values; session 8 measured +23% data reads and ~3% slower primary rays without them). Callgrind,
+// 128x128, mbvh4_single on conference: primary 30.99 M -> 30.09 M instructions (data reads +6.6%
+// of OLD's instead of +23%), bounce:2 38.8 M (OLD 40.7 M). Not for mbvh8_single: its eight
+// copies measured more instructions and stores (sponza bounce:2 45.8 M -> 51.0 M, primary
+// 42.3 M -> 43.7 M; conference alike), so it keeps kPerOctant = false.
 template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, bool kPerOctant = false, class P>
 void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                      P& probe) {
