@@ -259,15 +259,19 @@ inline Vec3D<double> to_double(const Vec3& v) { return {v.x, v.y, v.z}; }
 // The watertight test for one ray. On a hit with tmin <= t < hit.t, updates hit (t, u, v) and
 // returns true.
 inline bool intersect_watertight(const RayCtx& r, const TriVerts& tri, float tmin, Hit& hit) {
-  const Vec3 A = tri.v0 - r.org, B = tri.v1 - r.org, C = tri.v2 - r.org;
+  // The permuted coordinates by indexed loads (Vec3 is three packed floats), not by Vec3's
+  // branching operator[]: nine selects per triangle on the ray's axes.
+  static_assert(sizeof(Vec3) == 3 * sizeof(float));
+  const float *o = &r.org.x, *a = &tri.v0.x, *b = &tri.v1.x, *c = &tri.v2.x;
+  const float Az = a[r.kz] - o[r.kz], Bz = b[r.kz] - o[r.kz], Cz = c[r.kz] - o[r.kz];
   float U, V, W, det;
-  if (!watertight_inside<1>(shear<1>(A[r.kx], r.sx, A[r.kz]), shear<1>(A[r.ky], r.sy, A[r.kz]),
-                            shear<1>(B[r.kx], r.sx, B[r.kz]), shear<1>(B[r.ky], r.sy, B[r.kz]),
-                            shear<1>(C[r.kx], r.sx, C[r.kz]), shear<1>(C[r.ky], r.sy, C[r.kz]), U, V, W, det))
+  if (!watertight_inside<1>(shear<1>(a[r.kx] - o[r.kx], r.sx, Az), shear<1>(a[r.ky] - o[r.ky], r.sy, Az),
+                            shear<1>(b[r.kx] - o[r.kx], r.sx, Bz), shear<1>(b[r.ky] - o[r.ky], r.sy, Bz),
+                            shear<1>(c[r.kx] - o[r.kx], r.sx, Cz), shear<1>(c[r.ky] - o[r.ky], r.sy, Cz), U, V, W, det))
     return false;
   const float inv_det = 1.f / det;
   float t = exact_plane_distance(r.org, r.dir, tri);
-  if (std::isnan(t)) t = sheared_distance<1>(r.sz, U, V, W, A[r.kz], B[r.kz], C[r.kz], inv_det);
+  if (std::isnan(t)) t = sheared_distance<1>(r.sz, U, V, W, Az, Bz, Cz, inv_det);
   if (!(t >= tmin && t < hit.t)) return false;
   hit.t = t;
   hit.u = V * inv_det;
