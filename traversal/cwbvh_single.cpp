@@ -6,14 +6,18 @@
 // computed near distance is a lower bound and every far one an upper bound of the exact distance,
 // so a child the ray really enters is never culled (traversal/cwbvh_traverse.h has the bound; the
 // builder's quantization guarantees the decoded box contains the true one).
-// Children are ordered by `order`, as mbvh8_single's: auto (default) = branching for
-// common-origin batches (primary rays: one or two entered children take a branch that predicts
-// well there, no sort; crytek primary 128x128 under callgrind: 2431 -> 2168 instructions per ray),
-// sort = the bitonic network on distance keys for every node (bounce rays, where those branches
-// mispredict). octant takes the builder's octant-ordered slots (Ylitie et al. 2017 §3.2/§4;
-// structures/cwbvh.h): the entered slots, read in the order slot ^ ray octant, are approximately
-// near to far, so one table lookup (kCWOctantOrder) gives the push order and the child to enter, no
-// sort. It is not the default: the approximate order enters far children first often enough that
+// Children are ordered by `order` (the values of mbvh8_single's, plus octant): branching (default)
+// enters a single entered child directly and compares two, and sorts three or more with the
+// bitonic network on distance keys; sort takes the network for every node; auto is mbvh8_single's
+// default (branching for common-origin batches, sort otherwise). mbvh8_single needs sort on bounce
+// rays, where the branches mispredict; cwbvh_single's longer node test hides them: branching
+// was faster on bounce:2 too (512x512, 5 alternating runs each, median Mrays/s sort -> branching:
+// spheres:2M 0.522 -> 0.562, crytek 1.065 -> 1.081), and on primary rays (callgrind, crytek
+// 128x128: 2431 -> 2168 instructions per ray; docs/PERFORMANCE.md, session 9).
+// octant takes the builder's octant-ordered slots (Ylitie et al. 2017 §3.2/§4; structures/cwbvh.h):
+// the entered slots, read in the order slot ^ ray octant, are approximately near to far, so one
+// table lookup (kCWOctantOrder) gives the push order and the child to enter, no sort. Not the
+// default: the approximate order enters far children first often enough that
 // crytek's primary rays test 3.01 leaves instead of 1.80 (bounce:2 4.21 instead of 3.19) and take
 // more instructions than sort (2629 vs 2431; docs/PERFORMANCE.md, session 9). Whatever the order,
 // popped children whose entry distance is not below the closest hit are skipped, so the order
@@ -112,9 +116,9 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const CWBVH& t = *cw_;
     std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
-    const CWOrder order = order_ == "octant"   ? CWOrder::octant
+    const CWOrder order = order_ == "octant"                                                  ? CWOrder::octant
                           : order_ == "sort" || (order_ == "auto" && !batch.common_origin) ? CWOrder::sort
-                          : CWOrder::branching;
+                                                                                            : CWOrder::branching;
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       if (t.blocks.empty()) return;  // an empty scene: nothing to hit
       const RayCtx rc(ray);
@@ -143,8 +147,8 @@ ParamSpecs params_cwbvh_single() {
   ParamSpecs specs = mbvh_param_specs(kDefaults);
   for (ParamSpec& p : specs)
     if (p.name == "small") p = int_choice_param("small", 0, {0}, "always 0: the compressed layout holds 8-wide blocks only");
-  return specs + ParamSpecs{choice_param("order", "auto", {"auto", "sort", "branching", "octant"},
-                                         "child order: sort = sort_always, branching (as mbvh8_single's ChildOrder), "
+  return specs + ParamSpecs{choice_param("order", "branching", {"branching", "sort", "auto", "octant"},
+                                         "child order: branching, sort = sort_always (as mbvh8_single's ChildOrder), "
                                          "auto = branching for common-origin batches, sort otherwise; octant = the "
                                          "layout's octant-ordered slots (slot ^ ray octant, a table lookup, no sort)")};
 }
