@@ -89,6 +89,37 @@ uint32_t CWBVH::child_ref(uint32_t node, int slot) const {
   return cw_leaf_to_mbvh(n.leaf_base + n.meta[slot]);
 }
 
+std::array<int8_t, 8> cw_octant_slots(const MBVHNode<8>& n) {
+  std::array<int8_t, 8> child{-1, -1, -1, -1, -1, -1, -1, -1};
+  const int nc = int(n.num_children);
+  AABB u;
+  for (int i = 0; i < nc; ++i) u.grow(n.child_box(i));
+  double cost[8][8];
+  for (int i = 0; i < nc; ++i) {
+    const AABB b = n.child_box(i);
+    for (int s = 0; s < 8; ++s) {
+      cost[i][s] = 0;
+      for (int a = 0; a < 3; ++a) {
+        // Centroids relative to the node's (in double: no overflow at any coordinate).
+        const double c = (double(b.lo[a]) + b.hi[a]) - (double(u.lo[a]) + u.hi[a]);
+        cost[i][s] += (s >> a & 1) ? -c : c;
+      }
+    }
+  }
+  bool placed[8] = {};
+  for (int k = 0; k < nc; ++k) {
+    int bi = -1, bs = -1;
+    for (int i = 0; i < nc; ++i) {
+      if (placed[i]) continue;
+      for (int s = 0; s < 8; ++s)
+        if (child[s] < 0 && (bi < 0 || cost[i][s] < cost[bi][bs])) bi = i, bs = s;
+    }
+    placed[bi] = true;
+    child[bs] = int8_t(bi);
+  }
+  return child;
+}
+
 CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
   const auto t0 = std::chrono::steady_clock::now();
   if (m.small_leaf != 0 || !m.small.empty())
@@ -121,17 +152,20 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
       n.p[a] = nc ? u.lo[a] : 0.f;
       n.e[a] = cw_exponent(n.p[a], nc ? u.hi[a] : 0.f);
     }
-    // Interior children consecutively, then this node's leaf blocks consecutively.
+    // Interior children consecutively, then this node's leaf blocks consecutively, both in slot
+    // order.
     n.child_base = uint32_t(out.nodes.size());
     const uint32_t first_block = uint32_t(out.blocks.size());
     uint32_t interior = 0, block_off = 0;
     std::vector<Item> kids;
+    const std::array<int8_t, 8> slot_child = cw_octant_slots(src);
     for (int i = 0; i < 8; ++i) {
-      if (uint32_t(i) >= nc) {  // unused: lo > hi on every axis
+      const int c = slot_child[size_t(i)];
+      if (c < 0) {  // unused: lo > hi on every axis
         for (int a = 0; a < 3; ++a) n.qlo[a][i] = 255, n.qhi[a][i] = 0;
         continue;
       }
-      const AABB b = src.child_box(i);
+      const AABB b = src.child_box(c);
       for (int a = 0; a < 3; ++a) {
         const float s = cw_scale(n.e[a]);
         n.qlo[a][i] = cw_quantize_lo(n.p[a], s, b.lo[a]);
@@ -140,7 +174,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
         // only unused slots look inverted (a smaller q_lo still decodes at or below lo).
         n.qlo[a][i] = std::min(n.qlo[a][i], n.qhi[a][i]);
       }
-      const uint32_t ref = src.ref[i];
+      const uint32_t ref = src.ref[c];
       if (mbvh_ref::is_leaf(ref)) {
         const uint32_t ntris = mbvh_ref::num_tris(ref), nblocks = (ntris + 7) / 8;
         if (ntris > 16) throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most 16: merge <= 16)");

@@ -13,7 +13,14 @@
 // select and one add. A leaf holds at most 16 triangles and a node's leaves at most 16 blocks.
 // Unused slots have meta 0 and no imask bit: their reference is a real one-triangle leaf (the
 // node's first block, block 0 where it has none), so a ray that a padded box test lets into an
-// unused slot only tests a triangle of the scene. Leaves are the MBVH8's TriBlock<8> SoA blocks,
+// unused slot only tests a triangle of the scene.
+//
+// Child slots are octant-ordered (Ylitie et al. 2017 §3.2, ordering the children for the
+// octant-aware fixed-order traversal of §4): the builder places the children so that, for a ray
+// whose direction has octant o (bit a set: component a negative, as kernels.h's plane rows), the
+// slots taken in the order k ^ o, k = 0..7, come approximately near to far (cw_octant_slots). A
+// traversal then gets a near-to-far order of the entered children from the octant alone, without
+// sorting their distances; children are interior nodes and leaf blocks in slot order. Leaves are the MBVH8's TriBlock<8> SoA blocks,
 // tested by the same watertight SIMD kernel.
 //
 // Conservative quantization: a child's box decodes as lo = p + q_lo * 2^e, hi = p + q_hi * 2^e in
@@ -27,6 +34,7 @@
 #pragma once
 #include <xmmintrin.h>
 
+#include <array>
 #include <bit>
 #include <cstdint>
 #include <string>
@@ -76,6 +84,13 @@ struct CWBVH {
   uint32_t child_ref(uint32_t node, int slot) const;
   bool slot_used(uint32_t node, int slot) const;
 };
+
+// The slot assignment of one node (slot -> child index of the MBVH node, -1: unused), exposed for
+// tests. Slot s is meant to be entered first by rays of octant s: the cost of child i in slot s is
+// its centroid, relative to the node's centroid, projected on the diagonal direction of octant s
+// ((-1)^(s>>a&1) per axis a); the assignment of least total cost is approximated greedily: the
+// pair (child, free slot) of least cost first, ties to the lower child and slot index.
+std::array<int8_t, 8> cw_octant_slots(const MBVHNode<8>& n);
 
 // The compressed leaf reference: kLeaf | first block << 4 | (triangles - 1), at most 16 triangles
 // and 2^27 blocks. cw_leaf_to_mbvh gives the MBVH reference the leaf kernels take.

@@ -6,8 +6,23 @@
 // computed near distance is a lower bound and every far one an upper bound of the exact distance,
 // so a child the ray really enters is never culled (traversal/cwbvh_traverse.h has the bound; the
 // builder's quantization guarantees the decoded box contains the true one).
-// Children are ordered as mbvh8_single's "sort always" path orders them (bitonic network on
-// distance keys), leaves are the MBVH8's 8-wide triangle blocks under the watertight SIMD test.
+// Children are ordered by `order` (the values of mbvh8_single's, plus octant): branching (default)
+// enters a single entered child directly and compares two, and sorts three or more with the
+// bitonic network on distance keys; sort takes the network for every node; auto is mbvh8_single's
+// default (branching for common-origin batches, sort otherwise). mbvh8_single needs sort on bounce
+// rays, where the branches mispredict; cwbvh_single's longer node test hides them: branching
+// was faster on bounce:2 too (512x512, 5 alternating runs each, median Mrays/s sort -> branching:
+// spheres:2M 0.522 -> 0.562, crytek 1.065 -> 1.081), and on primary rays (callgrind, crytek
+// 128x128: 2431 -> 2168 instructions per ray; docs/PERFORMANCE.md, session 9).
+// octant takes the builder's octant-ordered slots (Ylitie et al. 2017 §3.2/§4; structures/cwbvh.h):
+// the entered slots, read in the order slot ^ ray octant, are approximately near to far, so one
+// table lookup (kCWOctantOrder) gives the push order and the child to enter, no sort. Not the
+// default: the approximate order enters far children first often enough that
+// crytek's primary rays test 3.01 leaves instead of 1.80 (bounce:2 4.21 instead of 3.19) and take
+// more instructions than sort (2629 vs 2431; docs/PERFORMANCE.md, session 9). Whatever the order,
+// popped children whose entry distance is not below the closest hit are skipped, so the order
+// changes the work, never the hits' distances.
+// Leaves are the MBVH8's 8-wide triangle blocks under the watertight SIMD test.
 // The tree is the SAH-collapsed MBVH8 (same parameters as mbvh8_single, leaves of at most 16
 // triangles), re-laid out and quantized.
 #include <cstddef>
@@ -23,7 +38,9 @@ namespace {
 
 constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // compresses mbvh8_single's cached tree
 
-template <class P>
+enum class CWOrder { branching, sort, octant };
+
+template <CWOrder O, class P>
 void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, MBVHStackEntry* stack, P& probe) {
   using S = simd::V<8>;
   const CWNode* nodes = t.nodes.data();
@@ -37,16 +54,35 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
       __m256 tn;
       const __m256 entered = cw_box_test(nd, r, tfar8, tn);
       const int mask = S::mask(entered);
-      if (mask) {
+      if constexpr (O == CWOrder::branching) {
+        if (mask) {
+          const auto prefetch = [&](uint32_t ref) {
+            if (mbvh_ref::is_leaf(ref)) return;
+            const char* p = reinterpret_cast<const char*>(&nodes[ref]);
+            _mm_prefetch(p, _MM_HINT_T0), _mm_prefetch(p + sizeof(CWNode) - 1, _MM_HINT_T0);
+          };
+          cur = enter_branching<8>(
+              mask, tn, [&](uint32_t i) { return cw_child_ref(nd, i); }, prefetch,
+              [&](int count, MBVHStackEntry* out) { return push_sorted8(cw_child_refs(nd), tn, entered, count, out); },
+              stack, sp, probe);
+          continue;
+        }
+      } else if (mask) {
         const int count = std::popcount(unsigned(mask));
         const __m256i refs = cw_child_refs(nd);
-        push_sorted8(refs, tn, entered, count, stack + sp);
+        if constexpr (O == CWOrder::octant) {
+          const uint64_t order = r.order[mask];
+          push_in_order8(refs, tn, _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(int64_t(order))), stack + sp);
+          cur = cw_child_ref(nd, uint32_t(order >> (8 * (count - 1))) & 7);
+        } else {
+          push_sorted8(refs, tn, entered, count, stack + sp);
+          alignas(32) uint32_t ref[8];
+          _mm256_store_si256(reinterpret_cast<__m256i*>(ref), refs);
+          cur = ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
+        }
         if constexpr (P::enabled) {
           for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
         }
-        alignas(32) uint32_t ref[8];
-        _mm256_store_si256(reinterpret_cast<__m256i*>(ref), refs);
-        cur = ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
         sp += uint32_t(count - 1);
         continue;
       }
@@ -63,7 +99,8 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
 
 class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
  public:
-  explicit CWBVHSingle(const SchemeConfig& cfg) : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)) {
+  explicit CWBVHSingle(const SchemeConfig& cfg)
+      : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)), order_(cfg.get_choice("order")) {
     if (params_.merge > 16) throw InputError("cwbvh_single: merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
     if (params_.bvh.max_leaf > 16) throw InputError("cwbvh_single: leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
   }
@@ -79,10 +116,20 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const CWBVH& t = *cw_;
     std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
+    const CWOrder order = order_ == "octant"                                                  ? CWOrder::octant
+                          : order_ == "sort" || (order_ == "auto" && !batch.common_origin) ? CWOrder::sort
+                                                                                            : CWOrder::branching;
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       if (t.blocks.empty()) return;  // an empty scene: nothing to hit
       const RayCtx rc(ray);
-      cw_traverse(t, CWRay(rc, ray.tmin, t.coord_bound), TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+      const CWRay cr(rc, ray.tmin, t.coord_bound);
+      if (order == CWOrder::branching) {
+        cw_traverse<CWOrder::branching>(t, cr, TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+      } else if (order == CWOrder::sort) {
+        cw_traverse<CWOrder::sort>(t, cr, TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+      } else {
+        cw_traverse<CWOrder::octant>(t, cr, TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+      }
     });
   }
 
@@ -90,6 +137,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   SchemeConfig cfg_;
   MBVHBuildParams params_;
   std::shared_ptr<const CWBVH> cw_;
+  std::string order_;
 };
 
 }  // namespace
@@ -99,7 +147,10 @@ ParamSpecs params_cwbvh_single() {
   ParamSpecs specs = mbvh_param_specs(kDefaults);
   for (ParamSpec& p : specs)
     if (p.name == "small") p = int_choice_param("small", 0, {0}, "always 0: the compressed layout holds 8-wide blocks only");
-  return specs;
+  return specs + ParamSpecs{choice_param("order", "branching", {"branching", "sort", "auto", "octant"},
+                                         "child order: branching, sort = sort_always (as mbvh8_single's ChildOrder), "
+                                         "auto = branching for common-origin batches, sort otherwise; octant = the "
+                                         "layout's octant-ordered slots (slot ^ ray octant, a table lookup, no sort)")};
 }
 
 }  // namespace tb

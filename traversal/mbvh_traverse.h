@@ -328,17 +328,22 @@ inline bool pop_pending(const MBVHStackEntry* stack, uint32_t& sp, float tfar, u
 }
 
 
-// The 8-wide case of push_sorted on the 8 child references `refs` (the compressed layout of
-// cwbvh_single decodes its references instead of storing them).
-inline uint32_t push_sorted8(__m256i refs, __m256 tn, __m256 entered, int count, MBVHStackEntry* out) {
-  const __m256i keys = mbvh_simd::sort8(mbvh_simd::sort_keys8(tn, entered));
-  const __m256i rev = _mm256_sub_epi32(_mm256_set1_epi32(count - 1), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
-  const __m256i idx = _mm256_and_si256(_mm256_permutevar8x32_epi32(keys, rev), _mm256_set1_epi32(7));
+// Writes the 8 stack entries (refs[idx[j]], tn[idx[j]]) to out[0..7]: the children in the order
+// idx gives, with their entry distances (push_sorted8; cwbvh_single's octant order).
+inline void push_in_order8(__m256i refs, __m256 tn, __m256i idx, MBVHStackEntry* out) {
   const __m256i sorted = _mm256_permutevar8x32_epi32(refs, idx);
   const __m256i dist = _mm256_permutevar8x32_epi32(_mm256_castps_si256(tn), idx);
   const __m256i lo = _mm256_unpacklo_epi32(sorted, dist), hi = _mm256_unpackhi_epi32(sorted, dist);
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(out), _mm256_permute2x128_si256(lo, hi, 0x20));
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(out) + 1, _mm256_permute2x128_si256(lo, hi, 0x31));
+}
+
+// The 8-wide case of push_sorted on the 8 child references `refs` (the compressed layout of
+// cwbvh_single decodes its references instead of storing them).
+inline uint32_t push_sorted8(__m256i refs, __m256 tn, __m256 entered, int count, MBVHStackEntry* out) {
+  const __m256i keys = mbvh_simd::sort8(mbvh_simd::sort_keys8(tn, entered));
+  const __m256i rev = _mm256_sub_epi32(_mm256_set1_epi32(count - 1), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  push_in_order8(refs, tn, _mm256_and_si256(_mm256_permutevar8x32_epi32(keys, rev), _mm256_set1_epi32(7)), out);
   const __m256i nearest = _mm256_and_si256(keys, _mm256_set1_epi32(7));
   return uint32_t(_mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(refs, nearest)));
 }
@@ -393,6 +398,41 @@ inline uint32_t min_key8(__m256i k) {
 //    branches predict well there and the next node's address waits for no key reduction
 //    (mbvh8_single's `order=auto` picks per batch; docs/PERFORMANCE.md, session 8).
 enum class ChildOrder { branching, sort_always };
+
+// ChildOrder::branching on the entered children `mask` (nonzero) of an N-wide node with entry
+// distances tn: returns the child to enter and pushes the others far-to-near onto stack[sp..]
+// (sp advanced). ref(i) is child i's reference, prefetch(ref) starts fetching a pushed child,
+// sorted(count, out) is push_sorted on the node (returns the nearest). Shared by mbvh_traverse and
+// cwbvh_single, whose nodes form their references differently.
+template <int N, class Ref, class Prefetch, class Sorted, class P>
+[[gnu::always_inline]] inline uint32_t enter_branching(int mask, typename simd::V<N>::f tn, Ref&& ref,
+                                                       Prefetch&& prefetch, Sorted&& sorted, MBVHStackEntry* stack,
+                                                       uint32_t& sp, P& probe) {
+  using S = simd::V<N>;
+  uint32_t c0 = uint32_t(std::countr_zero(unsigned(mask)));
+  const int rest = mask & (mask - 1);
+  if (!rest) return ref(c0);
+  if (!(rest & (rest - 1))) {
+    uint32_t c1 = uint32_t(std::countr_zero(unsigned(rest)));
+    float d0 = S::lane(tn, c0), d1 = S::lane(tn, c1);
+    if (d1 < d0) std::swap(c0, c1), std::swap(d0, d1);
+    const uint32_t far = ref(c1);
+    prefetch(far);
+    stack[sp] = {far, d1};
+    probe.write(&stack[sp], sizeof(MBVHStackEntry));
+    ++sp;
+    return ref(c0);
+  }
+  // Three or more: sort branch-free (keys carry the child index in their low bits) and push the
+  // entries far-to-near with whole-vector stores; enter the nearest.
+  const int count = std::popcount(unsigned(mask));
+  const uint32_t nearest = sorted(count, stack + sp);
+  if constexpr (P::enabled) {
+    for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
+  }
+  sp += uint32_t(count - 1);
+  return nearest;
+}
 
 // Where a suspended traversal resumes: the reference it visits next and its pending-stack depth.
 struct MBVHCursor {
@@ -451,31 +491,10 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
           continue;
         }
       } else if (mask) {
-        uint32_t c0 = uint32_t(std::countr_zero(unsigned(mask)));
-        const int rest = mask & (mask - 1);
-        if (!rest) {
-          cur = nd.ref[c0];
-          continue;
-        }
-        if (!(rest & (rest - 1))) {
-          uint32_t c1 = uint32_t(std::countr_zero(unsigned(rest)));
-          float d0 = S::lane(tn, c0), d1 = S::lane(tn, c1);
-          if (d1 < d0) std::swap(c0, c1), std::swap(d0, d1);
-          prefetch_ref(m, nd.ref[c1]);
-          stack[sp] = {nd.ref[c1], d1};
-          probe.write(&stack[sp], sizeof(MBVHStackEntry));
-          ++sp;
-          cur = nd.ref[c0];
-          continue;
-        }
-        // Three or more: sort branch-free (keys carry the child index in their low bits) and
-        // push the entries far-to-near with whole-vector stores; enter the nearest.
-        const int count = std::popcount(unsigned(mask));
-        cur = push_sorted<N>(nd, tn, entered, count, stack + sp);
-        if constexpr (P::enabled) {
-          for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
-        }
-        sp += uint32_t(count - 1);
+        cur = enter_branching<N>(
+            mask, tn, [&](uint32_t i) { return nd.ref[i]; }, [&](uint32_t ref) { prefetch_ref(m, ref); },
+            [&](int count, MBVHStackEntry* out) { return push_sorted<N>(nd, tn, entered, count, out); }, stack, sp,
+            probe);
         continue;
       }
     } else {
