@@ -41,7 +41,7 @@ namespace tb::packet {
 // group, and with a common origin the plane offsets are scalars. Every lane computes the very
 // same values as in box_mask: (plane - o) * inv, padded far, NaN-first min/max.
 template <bool kCommon>
-inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const __m256 lo8[3], const __m256 hi8[3]) {
+[[gnu::always_inline]] inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const __m256 lo8[3], const __m256 hi8[3]) {
   const int s = p.gsign[g];
   const RayGroup& G = p.rg[g];
   if (s < 0) return box_mask(G, lo8, hi8);
