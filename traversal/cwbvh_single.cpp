@@ -100,7 +100,7 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
 class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
  public:
   explicit CWBVHSingle(const SchemeConfig& cfg)
-      : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)), order_(cfg.get_choice("order")) {
+      : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)), order_(parse_order_param(cfg.get_choice("order"))) {
     if (params_.merge > 16) throw InputError("cwbvh_single: merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
     if (params_.bvh.max_leaf > 16) throw InputError("cwbvh_single: leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
   }
@@ -116,9 +116,9 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const CWBVH& t = *cw_;
     std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
-    const CWOrder order = order_ == "octant"                                                  ? CWOrder::octant
-                          : order_ == "sort" || (order_ == "auto" && !batch.common_origin) ? CWOrder::sort
-                                                                                            : CWOrder::branching;
+    const CWOrder order = order_ == OrderParam::octant ? CWOrder::octant
+                          : sorts_batch(order_, batch)    ? CWOrder::sort
+                                                          : CWOrder::branching;
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       if (t.blocks.empty()) return;  // an empty scene: nothing to hit
       const RayCtx rc(ray);
@@ -137,7 +137,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   SchemeConfig cfg_;
   MBVHBuildParams params_;
   std::shared_ptr<const CWBVH> cw_;
-  std::string order_;
+  OrderParam order_;
 };
 
 }  // namespace

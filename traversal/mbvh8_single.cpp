@@ -32,12 +32,12 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
  public:
   // tri_width=4: layout 0, 8: layout 1.
   explicit MBVH8Single(const SchemeConfig& cfg)
-      : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1), order_(cfg.get_choice("order")) {}
+      : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1), order_(parse_order_param(cfg.get_choice("order"))) {}
   std::string_view name() const override { return "mbvh8_single"; }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    const bool sort = order_ == "sort" || (order_ == "auto" && !batch.common_origin);
+    const bool sort = sorts_batch(order_, batch);
     dispatch_kernel(cfg_.kernel, [&](auto k) {
       data_.visit([&](const auto& d) {
         constexpr TriKernel K = decltype(k)::value;
@@ -54,7 +54,7 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
   }
 
  private:
-  std::string order_;
+  OrderParam order_;
 };
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include <bit>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -398,6 +399,22 @@ inline uint32_t min_key8(__m256i k) {
 //    branches predict well there and the next node's address waits for no key reduction
 //    (mbvh8_single's `order=auto` picks per batch; docs/PERFORMANCE.md, session 8).
 enum class ChildOrder { branching, sort_always };
+
+// The `order` parameter of mbvh8_single and cwbvh_single, parsed once when the scheme is made (the
+// registry has already refused any other value): a fixed order, `auto` (branching for
+// common-origin batches, sort_always otherwise: why, above), or cwbvh_single's `octant`.
+enum class OrderParam { branching, sort, automatic, octant };
+inline OrderParam parse_order_param(const std::string& v) {
+  if (v == "branching") return OrderParam::branching;
+  if (v == "sort") return OrderParam::sort;
+  if (v == "auto") return OrderParam::automatic;
+  if (v == "octant") return OrderParam::octant;
+  throw InputError("order: unknown child order '" + v + "'");
+}
+// Whether a batch is traversed with ChildOrder::sort_always under `o`.
+inline bool sorts_batch(OrderParam o, const RayBatch& batch) {
+  return o == OrderParam::sort || (o == OrderParam::automatic && !batch.common_origin);
+}
 
 // ChildOrder::branching on the entered children `mask` (nonzero) of an N-wide node with entry
 // distances tn: returns the child to enter and pushes the others far-to-near onto stack[sp..]
