@@ -218,6 +218,71 @@ template <int L>
   return S::mul(S::mul(sz, S::add(S::add(S::mul(U, Az), S::mul(V, Bz)), S::mul(W, Cz))), inv_det);
 }
 
+// Part (3a), before any scalar or double work: the lanes that passed watertight_inside but whose
+// hit distance is CERTAINLY outside [tmin, tfar) (issue 17: a ray leaving a surface passes the edge
+// test of the triangle behind it, and each such lane cost a double plane distance and a division).
+// The estimate is the sheared distance t = sheared_distance (computed here for all L lanes), and a
+// lane is rejected only when the bound E below proves the part (3) distance — exact_plane_distance
+// rounded to float, or this very sheared distance where the ray lies in the plane — outside the
+// range. Derivation (forward error analysis in the style of PBR 3rd ed. §3.9.6, which bounds the
+// same computation for its t > 0 test; u = 2^-24; M = the largest |X|, |Y|, |Z| of the three
+// sheared vertices as computed; det, t as computed):
+//   * shear: Z = fl(Pz - oz) is off by <= u M; X = fl(fl(Px - ox) - fl(sx Z)) with sx = fl(dx/dz),
+//     |sx| <= 1 (kz is the dominant axis): off by <= 6.01 u M from the exact sheared value (same Y);
+//   * each edge function (E = U, V, W): <= u |E| + 26.05 u M^2 (two products of values off by
+//     6.01 u M, their roundings and the subtraction's; the double recomputation of watertight_inside
+//     rounds once); U, V, W share a sign (the inside test), so sum |E| <= (1 + gamma_2) |det|;
+//   * det = fl(fl(U + V) + W): off by dD <= 3.01 u |det| + 78.2 u M^2 from the exact U + V + W;
+//   * T = sum E Z (3 roundings): off by dT <= 5.05 u M |det| + 78.3 u M^3;
+//   * exact t = sz T / det (Woop et al. 2013, in reals); computed t = fl(fl(sz T) fl(1 / det)):
+//     |t_exact - t| <= (|sz| dT + |t| dD) / (|det| - dD) + 4.01 u |t|   (while |det| > dD).
+// The code takes dD = 4 u |det| + 96 u M^2 + 2^-100 and dT = M (6 u |det| + 96 u M^2) + 2^-100
+// (>= 19% slack: E's own float evaluation, and part (3)'s double plane equation, whose error has
+// the same shape scaled by 2^-29) and E = (|sz| dT + |t| dD) / (|det| - dD) + 8 u |t|; the extra
+// 4 u |t| covers the rounding of t -+ E and part (3)'s final rounding to float. Flush-to-zero
+// (DAZ/FTZ in every tracing thread) adds absolute errors < 2^-124 per operation, covered by the
+// 2^-100 terms (|det| < 2^-100 leaves |det| - dD <= 0: E = +inf or NaN, never rejected). Rejected:
+//   t + E < tmin_lo = tmin (1 - 4u) - 2^-120   (then the float distance is < tmin, and not -0 when
+//                                              tmin = 0, which `t >= tmin` would take), or
+//   t - E >= tfar                              (then the float distance is >= tfar: rounding is
+//                                              monotone).
+// NaN or infinite t or E (overflow past M ~ 2^40, dir[kz] flushed to 0) compares false: kept.
+// MBVH.SIMDDistancePreTestIsConservative checks it against part (3) and long double on grazing
+// rays, origins on the triangle, tiny and huge coordinates; with E = 0 it rejects real hits.
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::m watertight_t_outside(
+    typename simd::V<L>::f Ax, typename simd::V<L>::f Ay, typename simd::V<L>::f Bx, typename simd::V<L>::f By,
+    typename simd::V<L>::f Cx, typename simd::V<L>::f Cy, typename simd::V<L>::f Az, typename simd::V<L>::f Bz,
+    typename simd::V<L>::f Cz, typename simd::V<L>::f U, typename simd::V<L>::f V, typename simd::V<L>::f W,
+    typename simd::V<L>::f det, typename simd::V<L>::f sz, typename simd::V<L>::f tmin_lo, typename simd::V<L>::f tfar,
+    typename simd::V<L>::f& t) {
+  using S = simd::V<L>;
+  using f = typename S::f;
+  constexpr float u = 0x1p-24f;
+  t = sheared_distance<L>(sz, U, V, W, Az, Bz, Cz, S::div(S::set1(1.f), det));
+  // A lane can only be rejected if t itself is out of range (E >= 0): the bound is built only then.
+  // Most candidates of primary rays are hits in range, and the bound's ~55 instructions per block
+  // cost mbvh8_single +7.6% instructions on sponza primary when built for every candidate block
+  // (callgrind, 128^2: 1287 -> 1385 per ray; with this exit: see docs/PERFORMANCE.md, session 9).
+  const typename S::m naive = S::or_(S::lt(t, tmin_lo), S::ge(t, tfar));
+  if (!S::mask(naive)) return naive;
+  const f mx = S::max(S::max(S::abs(Ax), S::abs(Bx)), S::abs(Cx));
+  const f my = S::max(S::max(S::abs(Ay), S::abs(By)), S::abs(Cy));
+  const f mz = S::max(S::max(S::abs(Az), S::abs(Bz)), S::abs(Cz));
+  const f M = S::max(S::max(mx, my), mz);
+  const f M2 = S::mul(M, M), adet = S::abs(det), tiny = S::set1(0x1p-100f);
+  const f c96 = S::mul(S::set1(96 * u), M2);
+  const f dD = S::add(S::add(S::mul(S::set1(4 * u), adet), c96), tiny);
+  const f dT = S::add(S::mul(M, S::add(S::mul(S::set1(6 * u), adet), c96)), tiny);
+  const f at = S::abs(t);
+  // |det| - dD <= 0 (or NaN) becomes 0: E = +inf (or NaN), no rejection.
+  const f den = S::max(S::sub(adet, dD), S::zero());
+  const f E = S::add(S::div(S::add(S::mul(S::abs(sz), dT), S::mul(at, dD)), den), S::mul(S::set1(8 * u), at));
+  return S::or_(S::lt(S::add(t, E), tmin_lo), S::ge(S::sub(t, E), tfar));
+}
+// The tmin_lo of watertight_t_outside for a ray's tmin (>= 0).
+inline float pretest_tmin(float tmin) { return tmin * (1.f - 4 * 0x1p-24f) - 0x1p-120f; }
+
 // Part (3): the distance along the ray to the triangle's plane in double, for candidates that
 // already passed the inside test (one or two per ray), as num / dn; dn == 0 when the ray is
 // parallel to the plane. Why not T/det: the sheared distance loses up to ~1e-3 relative on long,
