@@ -2,11 +2,9 @@
 // invariants, the SIMD primitives against their scalar definitions, counters, stream sizes and
 // kernel variants. Accuracy on every workload and the hard cases comes from test_schemes.cpp,
 // which iterates the registry.
-#include <bit>
 #include <random>
 
 #include "cachesim/hierarchy.h"
-#include "structures/cwbvh.h"  // FlushDenormals
 #include "traversal/mbvh_traverse.h"
 #include "workloads/hard_cases.h"
 #include "test_geometry.h"
@@ -304,145 +302,6 @@ void block_matches_scalar() {
 }
 TEST(MBVH, BlockTestMatchesScalarWatertight4) { block_matches_scalar<4>(); }
 TEST(MBVH, BlockTestMatchesScalarWatertight8) { block_matches_scalar<8>(); }
-
-// The SIMD distance pre-test of block_lanes (watertight_t_outside, kernels.h) may only drop a lane
-// whose part (3) distance (exact_plane_distance in float, the sheared distance for a ray in the
-// plane: what block_intersect decides by) is outside [tmin, tfar), and whose exact (long double)
-// plane distance is. Hammered on the cases its bound is for: origins on the triangle or a bounce
-// offset off it (the triangle behind), grazing rays, slivers, tiny and huge coordinates, tmin and
-// tfar at the distance itself. The naive test (the sheared distance against [tmin, tfar), no
-// bound) must drop some lane the decider keeps: without the bound this test fails.
-template <int W, int RW>
-void pretest_is_conservative(uint64_t& inside, uint64_t& dropped, uint64_t& naive_wrong) {
-  const FlushDenormals ftz;
-  std::mt19937 rng(17 + W + RW);
-  std::uniform_real_distribution<float> U(-1.f, 1.f), U01(0.f, 1.f);
-  for (float offset : {0.f, 1.f, 1e3f, -1e5f, 1e6f, 1e7f}) {
-    for (float scale : {1e-20f, 1e-6f, 1e-3f, 1.f, 100.f, 1e4f}) {
-      const Vec3 base{offset, -0.5f * offset, 0.25f * offset};
-      for (int iter = 0; iter < 300; ++iter) {
-        TriBlock<W> blk;
-        TriVerts tri[W];
-        const Vec3 centre = base + Vec3{U(rng), U(rng), U(rng)} * scale;
-        const Vec3 nrm0 = normalize(Vec3{U(rng), U(rng), U(rng)} + Vec3{0, 1e-3f, 0});
-        for (int l = 0; l < W; ++l) {
-          Vec3 a = centre + Vec3{U(rng), U(rng), U(rng)} * scale, b, c;
-          switch (rng() % 4) {
-            case 0:  // a sliver
-              b = a + Vec3{U(rng), U(rng), U(rng)} * scale;
-              c = a + (b - a) * U01(rng) + Vec3{U(rng), U(rng), U(rng)} * (1e-4f * scale);
-              break;
-            case 1:  // a triangle of the plane through `centre` (a neighbour of lane 0's)
-              a = centre + cross(nrm0, Vec3{U(rng), U(rng), U(rng)}) * scale;
-              b = centre + cross(nrm0, Vec3{U(rng), U(rng), U(rng)}) * scale;
-              c = centre + cross(nrm0, Vec3{U(rng), U(rng), U(rng)}) * scale;
-              break;
-            case 2:  // a large one
-              b = a + Vec3{U(rng), U(rng), U(rng)} * (30 * scale);
-              c = a + Vec3{U(rng), U(rng), U(rng)} * (30 * scale);
-              break;
-            default:
-              b = a + Vec3{U(rng), U(rng), U(rng)} * scale;
-              c = a + Vec3{U(rng), U(rng), U(rng)} * scale;
-              break;
-          }
-          tri[l] = {a, b, c};
-          const Vec3 v[3] = {a, b, c};
-          for (int k = 0; k < 3; ++k) blk.v[k][0][l] = v[k].x, blk.v[k][1][l] = v[k].y, blk.v[k][2][l] = v[k].z;
-          blk.prim[l] = uint32_t(l);
-        }
-        for (int r = 0; r < 8; ++r) {
-          const TriVerts& tt = tri[rng() % W];
-          const Vec3 e1 = tt.v1 - tt.v0, e2 = tt.v2 - tt.v0, n = cross(e1, e2);
-          const Vec3 nn = length(n) > 0.f ? normalize(n) : nrm0;
-          const float a = U01(rng), b = U01(rng) * (1.f - a);
-          const Vec3 on = tt.v0 + e1 * a + e2 * b;  // a point of the triangle, rounded
-          const float size = std::max(length(e1), length(e2));
-          const float mag = std::max({std::fabs(on.x), std::fabs(on.y), std::fabs(on.z)});
-          Vec3 o;
-          switch (rng() % 5) {
-            case 0: o = on; break;
-            case 1: o = on + nn * (std::max(1e-4f * size, 4e-6f * mag) * (rng() % 2 ? 1.f : -1.f)); break;
-            case 2: o = tt.v0; break;
-            case 3: o = on + Vec3{U(rng), U(rng), U(rng)} * (3 * size); break;
-            default: o = on + Vec3{U(rng), U(rng), U(rng)} * (1e3f * size); break;
-          }
-          Vec3 d;
-          switch (rng() % 4) {
-            case 0: d = tt.v0 + e1 * U01(rng) * 0.5f + e2 * U01(rng) * 0.5f - o; break;  // at the triangle
-            case 1: d = e1 + nn * (length(e1) * (rng() % 2 ? 1e-4f : 1e-7f) * U(rng)); break;  // grazing
-            case 2: d = nn * U(rng) + Vec3{U(rng), U(rng), U(rng)} * 0.3f; break;  // off a surface, either side
-            default: d = {U(rng), U(rng), U(rng)}; break;
-          }
-          for (int k = 0; k < 3; ++k) {
-            const uint32_t m = rng() % 24;
-            if (m == 0) d[k] = 0.f;
-            else if (m == 1) d[k] = 1e-40f;  // denormal: 0 under DAZ
-            else if (m == 2) d[k] = std::copysign(1e-30f, U(rng));
-          }
-          if (!(std::fabs(d.x) > 1e-30f || std::fabs(d.y) > 1e-30f || std::fabs(d.z) > 1e-30f)) d = nn;
-          if (rng() % 2) d = normalize(d);
-          Ray ray;
-          ray.org = o, ray.dir = d;
-          const RayCtx rc(ray);
-          // tmin and tfar: defaults, random, or at the float distance of this ray to a lane's plane.
-          const float tl = exact_plane_distance(o, d, tri[rng() % W]);
-          float tmin = 0.f, tfar = INFINITY;
-          switch (rng() % 6) {
-            case 0: tmin = 1e-3f * scale * U01(rng); break;
-            case 1: if (tl >= 0.f) tmin = tl; break;
-            case 2: if (tl > 0.f) tmin = std::nextafter(tl, 0.f); break;
-            case 3: if (tl > 0.f) tfar = tl; break;
-            case 4: if (tl > 0.f) tfar = std::nextafter(tl, INFINITY); break;
-            default: tfar = 2.f * scale * U01(rng); break;
-          }
-          if (!(tfar > tmin)) tfar = INFINITY;
-          ray.tmin = tmin, ray.tmax = tfar;
-          BlockLanes<W> L;
-          const uint32_t tris = W - uint32_t(rng() % 2);
-          if (!block_lanes<W, RW>(TriRay<RW>(rc, tmin), blk, tfar, tris, L)) continue;
-          alignas(32) float us[W], vs[W], ws[W], dets[W], azs[W], bzs[W], czs[W], ts[W];
-          simd::V<W>::store(us, L.U), simd::V<W>::store(vs, L.V), simd::V<W>::store(ws, L.Ww);
-          simd::V<W>::store(dets, L.det), simd::V<W>::store(azs, L.Az), simd::V<W>::store(bzs, L.Bz);
-          simd::V<W>::store(czs, L.Cz), simd::V<W>::store(ts, L.t);
-          for (int m = L.inside; m; m &= m - 1) {
-            const int l = std::countr_zero(unsigned(m));
-            ++inside;
-            float t = exact_plane_distance(o, d, tri[l]);  // block_intersect's part (3)
-            if (std::isnan(t)) t = sheared_distance<1>(rc.sz, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], 1.f / dets[l]);
-            const bool kept = t >= tmin && t < tfar;
-            if (!(ts[l] >= tmin && ts[l] < tfar) && kept) ++naive_wrong;
-            if (!(L.outside >> l & 1)) continue;
-            ++dropped;
-            ASSERT_FALSE(kept) << "pre-test dropped a hit: offset " << offset << " scale " << scale << " lane " << l
-                               << " t " << t << " estimate " << ts[l] << " range [" << tmin << ", " << tfar << ")";
-            using LD = long double;
-            const TriVerts& q = tri[l];
-            const LD ax = LD(q.v1.x) - q.v0.x, ay = LD(q.v1.y) - q.v0.y, az = LD(q.v1.z) - q.v0.z;
-            const LD bx = LD(q.v2.x) - q.v0.x, by = LD(q.v2.y) - q.v0.y, bz = LD(q.v2.z) - q.v0.z;
-            const LD nx = ay * bz - az * by, ny = az * bx - ax * bz, nz = ax * by - ay * bx;
-            const LD dn = nx * d.x + ny * d.y + nz * d.z;
-            if (dn == 0) continue;
-            const LD te = (nx * (LD(q.v0.x) - o.x) + ny * (LD(q.v0.y) - o.y) + nz * (LD(q.v0.z) - o.z)) / dn;
-            ASSERT_FALSE(te >= tmin && te < tfar) << "pre-test dropped an exact hit: offset " << offset << " scale "
-                                                  << scale << " t " << double(te) << " estimate " << ts[l];
-          }
-        }
-      }
-    }
-  }
-}
-TEST(MBVH, SIMDDistancePreTestIsConservative) {
-  uint64_t inside = 0, dropped = 0, naive_wrong = 0;
-  pretest_is_conservative<8, 8>(inside, dropped, naive_wrong);
-  pretest_is_conservative<4, 4>(inside, dropped, naive_wrong);
-  pretest_is_conservative<4, 8>(inside, dropped, naive_wrong);
-  std::printf("distance pre-test: %llu lanes passed the edge test, %llu dropped; the naive test would have dropped "
-              "%llu kept ones\n",
-              (unsigned long long)inside, (unsigned long long)dropped, (unsigned long long)naive_wrong);
-  EXPECT_GT(dropped, inside / 10) << "the pre-test should drop a fair share (the triangles behind the origins)";
-  EXPECT_GT(naive_wrong, 0u) << "no case needed the bound";
-}
 
 Bench& room_bench() {
   static Bench bench(load_scene("room"));

@@ -170,66 +170,39 @@ template <int W>
 constexpr uint32_t block_tris(uint32_t ntris, uint32_t k) { return std::min<uint32_t>(W, ntris - k * W); }
 constexpr uint32_t lane_bits(uint32_t n) { return (1u << n) - 1; }
 
-// The watertight test's values on the W lanes of a block (sheared z, edge functions, det, and the
-// sheared distance t where watertight_t_outside ran), and which lanes it keeps.
-template <int W>
-struct BlockLanes {
-  using f = typename simd::V<W>::f;
-  f Az, Bz, Cz, U, V, Ww, det, t;
-  int inside = 0;   // real lanes that pass the edge test
-  int outside = 0;  // those whose distance is certainly outside [tmin, tfar)
-};
-
-// Parts (1), (2) and (3a) of the kernel library's watertight test on W triangles at once (one ray,
-// W lanes): the same float operations in the same order per lane as intersect_watertight, so its
-// watertightness carries over. `tris` counts the leaf's triangles from this block on (>= W: every
-// lane is real): the last block of a leaf pads with copies of its last triangle, and a ray whose
-// line crosses that triangle (one leaving it, say) would otherwise pay the double distance once
-// per copy (issue 17). The padding lanes are masked, and the SIMD distance pre-test
-// (watertight_t_outside) run, only once some lane passes the edge test: most blocks are missed by
-// every lane, and building the mask before the test cost ~3 instructions per block (callgrind,
-// mbvh4_single sponza primary: 1.0 M of 59.6 M). Returns L.inside (0: no candidate, the rest of
-// L undefined). The ray's constants may come from a wider TriRay (RW = 8 for the 4-wide
-// small-leaf blocks).
+// The watertight test of the kernel library on W triangles at once (one ray, W lanes): the same
+// float operations in the same order per lane as intersect_watertight, so its watertightness
+// carries over. On a hit with tmin <= t < hit.t records the closest (the first lane on ties, as a
+// scalar loop would) and returns true. `tris` counts the leaf's triangles from this block on (>= W:
+// every lane is real): the last block of a leaf pads with copies of its last triangle, and a ray
+// whose line crosses that triangle (one leaving it, say) would otherwise pay the double distance
+// once per copy (issue 17). The padding lanes are masked only once some lane passes the edge
+// test: most blocks are missed by every lane, and building the mask before the test cost ~3
+// instructions per block (callgrind, mbvh4_single sponza primary: 1.0 M of 59.6 M).
+// The ray's constants may come from a wider TriRay (RW = 8 for the 4-wide small-leaf blocks).
 template <int W, int RW = W>
-[[gnu::always_inline]] inline int block_lanes(const TriRay<RW>& r, const TriBlock<W>& b, float tfar, uint32_t tris,
-                                              BlockLanes<W>& L) {
+[[gnu::noinline]] inline bool block_intersect(const TriRay<RW>& r, const TriBlock<W>& b, Hit& hit, uint32_t tris) {
   using S = simd::V<W>;
   using f = typename S::f;
   const f ox = lanes_of<W, RW>(r.ox), oy = lanes_of<W, RW>(r.oy), oz = lanes_of<W, RW>(r.oz);
   const f sx = lanes_of<W, RW>(r.sx), sy = lanes_of<W, RW>(r.sy);
-  L.Az = S::sub(S::load(b.v[0][r.kz]), oz);
-  L.Bz = S::sub(S::load(b.v[1][r.kz]), oz);
-  L.Cz = S::sub(S::load(b.v[2][r.kz]), oz);
-  const f Ax = shear<W>(S::sub(S::load(b.v[0][r.kx]), ox), sx, L.Az);
-  const f Ay = shear<W>(S::sub(S::load(b.v[0][r.ky]), oy), sy, L.Az);
-  const f Bx = shear<W>(S::sub(S::load(b.v[1][r.kx]), ox), sx, L.Bz);
-  const f By = shear<W>(S::sub(S::load(b.v[1][r.ky]), oy), sy, L.Bz);
-  const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), ox), sx, L.Cz);
-  const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), oy), sy, L.Cz);
-  L.inside = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, L.U, L.V, L.Ww, L.det));
-  if (!L.inside) return 0;
-  if (tris < uint32_t(W)) L.inside &= int(lane_bits(tris));
-  L.outside = S::mask(watertight_t_outside<W>(Ax, Ay, Bx, By, Cx, Cy, L.Az, L.Bz, L.Cz, L.U, L.V, L.Ww, L.det,
-                                              lanes_of<W, RW>(r.sz), S::set1(pretest_tmin(r.tmin)), S::set1(tfar),
-                                              L.t));
-  return L.inside;
-}
-
-// The watertight test of the kernel library on the W triangles of a block: block_lanes, then part
-// (3) for the lanes it keeps. On a hit with tmin <= t < hit.t records the closest (the first lane
-// on ties, as a scalar loop would) and returns true.
-template <int W, int RW = W>
-[[gnu::noinline]] inline bool block_intersect(const TriRay<RW>& r, const TriBlock<W>& b, Hit& hit, uint32_t tris) {
-  using S = simd::V<W>;
-  BlockLanes<W> L;
-  if (!block_lanes<W, RW>(r, b, hit.t, tris, L)) return false;
-  int m = L.inside & ~L.outside;
+  const f Az = S::sub(S::load(b.v[0][r.kz]), oz);
+  const f Bz = S::sub(S::load(b.v[1][r.kz]), oz);
+  const f Cz = S::sub(S::load(b.v[2][r.kz]), oz);
+  const f Ax = shear<W>(S::sub(S::load(b.v[0][r.kx]), ox), sx, Az);
+  const f Ay = shear<W>(S::sub(S::load(b.v[0][r.ky]), oy), sy, Az);
+  const f Bx = shear<W>(S::sub(S::load(b.v[1][r.kx]), ox), sx, Bz);
+  const f By = shear<W>(S::sub(S::load(b.v[1][r.ky]), oy), sy, Bz);
+  const f Cx = shear<W>(S::sub(S::load(b.v[2][r.kx]), ox), sx, Cz);
+  const f Cy = shear<W>(S::sub(S::load(b.v[2][r.ky]), oy), sy, Cz);
+  f U, Vv, Ww, det;
+  int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return false;
+  if (tris < uint32_t(W)) m &= int(lane_bits(tris));
   // The candidates (usually none or one per block): exact_plane_distance's plane equation in
   // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
   alignas(32) float us[W], vs[W], ws[W], dets[W];
-  S::store(us, L.U), S::store(vs, L.V), S::store(ws, L.Ww), S::store(dets, L.det);
+  S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
   bool found = false;
   for (; m; m &= m - 1) {
     const int l = std::countr_zero(unsigned(m));
@@ -244,7 +217,7 @@ template <int W, int RW = W>
       t = float(num / dn);
     } else {
       alignas(32) float azs[W], bzs[W], czs[W];
-      S::store(azs, L.Az), S::store(bzs, L.Bz), S::store(czs, L.Cz);
+      S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
       t = sheared_distance<1>(r.szs, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det);
     }
     if (!(t >= r.tmin && t < hit.t)) continue;
