@@ -117,6 +117,19 @@ def main():
         for key, r in rows:
             scene, wl, scheme = key
             print(f"{scene:24s} {wl:10s} {scheme:16s} {statistics.median(r):.3f}  [{min(r):.3f}..{max(r):.3f}]  normalised {norm(key)}")
+    # Per scheme: the geometric mean of its cells' medians and its lowest cell.
+    by_scheme = defaultdict(list)
+    for (scene, wl, scheme), r in rows:
+        by_scheme[scheme].append(statistics.median(r))
+    if args.markdown:
+        print("\n| scheme | geometric mean of the cells' medians | lowest cell |")
+        print("|---|---|---|")
+    for scheme, meds in sorted(by_scheme.items()):
+        gm = statistics.geometric_mean(meds)
+        if args.markdown:
+            print(f"| {scheme} | {gm:.3f} | {min(meds):.3f} |")
+        else:
+            print(f"{scheme:16s} geometric mean {gm:.3f}  lowest cell {min(meds):.3f}")
     worst = min(rows, key=lambda kv: statistics.median(kv[1])) if rows else None
     if worst:
         print(f"slowest cell: {worst[0]} median new/old {statistics.median(worst[1]):.3f}", file=sys.stderr)

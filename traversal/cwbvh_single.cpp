@@ -145,8 +145,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
 std::unique_ptr<Traverser> make_cwbvh_single(const SchemeConfig& cfg) { return std::make_unique<CWBVHSingle>(cfg); }
 ParamSpecs params_cwbvh_single() {
   ParamSpecs specs = mbvh_param_specs(kDefaults);
-  for (ParamSpec& p : specs)
-    if (p.name == "small") p = int_choice_param("small", 0, {0}, "always 0: the compressed layout holds 8-wide blocks only");
+  param_named(specs, "small") = int_choice_param("small", 0, {0}, "always 0: the compressed layout holds 8-wide blocks only");
   return specs + ParamSpecs{choice_param("order", "branching", {"branching", "sort", "auto", "octant"},
                                          "child order: branching, sort = sort_always (as mbvh8_single's ChildOrder), "
                                          "auto = branching for common-origin batches, sort otherwise; octant = the "

@@ -135,9 +135,9 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 std::unique_ptr<Traverser> make_mbvh_rs(const SchemeConfig& cfg) { return std::make_unique<MBVHRayStream>(cfg); }
 ParamSpecs params_mbvh_rs() {
   ParamSpecs p = mbvh_param_specs(kDefaults8);
-  for (ParamSpec& s : p)
-    if (s.name == "merge") s = auto_default(s, "4 with width=4, 8 with width=8");
-    else if (s.name == "collapse") s = auto_default(s, "greedy with width=4, sah with width=8");
+  ParamSpec &merge = param_named(p, "merge"), &collapse = param_named(p, "collapse");
+  merge = auto_default(merge, "4 with width=4, 8 with width=8");
+  collapse = auto_default(collapse, "greedy with width=4, sah with width=8");
   return p + ParamSpecs{int_choice_param("width", kDefaultWidth, {4, 8}, "MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
                         int_param("stream", 256, 1, 65536, "most rays per stream (consecutive packets of the batch)")};
 }

@@ -4,6 +4,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
 
 #include "structures/scene.h"
 
@@ -135,6 +136,12 @@ const ParamSpec* find_param(const ParamSpecs& specs, const std::string& name) {
   for (const auto& s : specs)
     if (s.name == name) return &s;
   return nullptr;
+}
+
+ParamSpec& param_named(ParamSpecs& specs, const std::string& name) {
+  for (auto& s : specs)
+    if (s.name == name) return s;
+  throw std::logic_error("no parameter named " + name + " to refine");
 }
 
 std::string closest_name(const std::string& key, const std::vector<std::string>& names) {

@@ -41,6 +41,9 @@ ParamSpec auto_default(ParamSpec spec, const std::string& how);
 
 ParamSpecs operator+(ParamSpecs a, const ParamSpecs& b);
 const ParamSpec* find_param(const ParamSpecs& specs, const std::string& name);
+// The spec called `name`, to refine one inherited from a shared list (a scheme narrowing a range
+// or clearing a default); throws std::logic_error when the list has none (a programming error).
+ParamSpec& param_named(ParamSpecs& specs, const std::string& name);
 
 // The name in `names` closest to `key` by edit distance (case-insensitive, '_' and '-' ignored),
 // or "" when none is plausibly meant (more than a third of the letters differ).
