@@ -40,6 +40,9 @@ namespace tb::packet {
 // (the common case for coherent rays): the near and far planes are then chosen once for the
 // group, and with a common origin the plane offsets are scalars. Every lane computes the very
 // same values as in box_mask: (plane - o) * inv, padded far, NaN-first min/max.
+// Forced inline, as are NodeTester::operator() and ia_misses (packet_bounds.h): after session 8's
+// merges g++ 12 made all three calls (one per 8-ray group or node), e.g. bvh_ranged sponza
+// bounce:2 270.3 M instructions, inlined 250.8 M (OLD 984423f 261.6 M; docs/PERFORMANCE.md, session 9).
 template <bool kCommon>
 [[gnu::always_inline]] inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const __m256 lo8[3], const __m256 hi8[3]) {
   const int s = p.gsign[g];
@@ -132,7 +135,7 @@ struct NodeTester {
       });
     }
   }
-  [[gnu::always_inline]] uint32_t operator()(uint32_t g) const {
+  [[gnu::always_inline]] uint32_t operator()(uint32_t g) const {  // forced inline: see group_box
     if (!pre) {
       if constexpr (kHoistPlanes) return group_box<kCommon>(p, g, n, planes.v, planes.v + 3);
       const __m256 L[3] = {_mm256_set1_ps(n.lo.x), _mm256_set1_ps(n.lo.y), _mm256_set1_ps(n.lo.z)};
