@@ -72,14 +72,27 @@ def main():
     ap.add_argument("--scenes", required=True)
     ap.add_argument("--workloads", default="primary,bounce:2")
     ap.add_argument("--schemes", default="all")
-    ap.add_argument("--reps", type=int, default=5)
-    ap.add_argument("--rounds", type=int, default=3)
+    # Options of one mode only default to None, so that giving one to the other mode is refused.
+    ap.add_argument("--reps", type=int, help="timed: reps per run (default 5)")
+    ap.add_argument("--rounds", type=int, help="timed: interleaved rounds (default 3)")
     ap.add_argument("--out", default="/tmp/ab_compare")
-    ap.add_argument("--markdown", action="store_true")
-    ap.add_argument("--control", default="embree_single")
+    ap.add_argument("--markdown", action="store_true", help="timed: markdown tables")
+    ap.add_argument("--control", help="timed: the scheme each run is normalised by (default embree_single)")
     ap.add_argument("--callgrind", action="store_true")
-    ap.add_argument("--size", type=int, default=128, help="image side of --callgrind runs")
+    ap.add_argument("--size", type=int, help="--callgrind: image side (default 128)")
     args = ap.parse_args()
+    timed_only = {"--reps": args.reps, "--rounds": args.rounds, "--control": args.control,
+                  "--markdown": args.markdown or None}
+    if args.callgrind:
+        given = [k for k, v in timed_only.items() if v is not None]
+        if given:
+            ap.error(f"{', '.join(given)}: not used with --callgrind (one count per cell)")
+        args.size = args.size or 128
+    else:
+        if args.size is not None:
+            ap.error("--size: only with --callgrind (timed runs use travbench's default 512x512)")
+        args.reps, args.rounds = args.reps or 5, args.rounds or 3
+        args.control = args.control or "embree_single"
     os.makedirs(args.out, exist_ok=True)
     if args.callgrind:
         return callgrind_main(args)
