@@ -217,6 +217,11 @@ template <int W, int RW = W>
   bool found = false;
   for (; m; m &= m - 1) {
     const int l = std::countr_zero(unsigned(m));
+    // The ray's current closest hit again (a spatial-split tree references a big triangle from
+    // every leaf it was split into, and the leaves along a ray repeat it): the same vertices
+    // give the same t, which cannot be closer, so its double evaluation is skipped. Plain trees:
+    // +-0.03% instructions; stadium with spatial=1: primary -3.7%, mispredictions -21% (callgrind).
+    if (b.prim[l] == hit.prim) continue;
     const Vec3D<double> v0{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]};
     double num, dn;
     plane_terms(plane_normal(v0, Vec3D<double>{b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
