@@ -18,7 +18,7 @@ std::string BVHBuildParams::key() const {
   std::snprintf(buf, sizeof buf, "bvh:bins=%d:leaf=%d:ct=%g:ci=%g", bins, max_leaf, cost_traversal, cost_intersect);  // threads do not change the tree
   std::string k = buf;
   if (spatial) {
-    std::snprintf(buf, sizeof buf, ":spatial:alpha=%g:budget=%g", split_alpha, split_budget);
+    std::snprintf(buf, sizeof buf, ":spatial:alpha=%g:budget=%g:wall=%g", split_alpha, split_budget, split_wall);
     k += buf;
   }
   return k;
@@ -355,6 +355,7 @@ BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
     SpatialSplitParams sp;
     sp.alpha = p.split_alpha;
     sp.budget = p.split_budget;
+    sp.wall = p.split_wall;
     return build_spatial_bvh(scene, p, sp);
   }
   const auto t0 = std::chrono::steady_clock::now();

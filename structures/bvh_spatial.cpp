@@ -50,6 +50,7 @@ class SpatialBuilder {
     BVH bvh;
     AABB root;
     for (const auto& r : refs) root.grow(r.box);
+    mark_walls(refs, root);
     root_area_ = std::max(root.area(), 1e-30f);
     bvh.nodes.resize(2);
     bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(refs.size())};
@@ -284,6 +285,19 @@ class SpatialBuilder {
     right = intersect(right, box);
   }
 
+  // SpatialSplitParams::wall: the triangles whose (starting) box spans `wall` of the root's
+  // extent on two axes, flagged by triangle id.
+  void mark_walls(const std::vector<SpatialRef>& refs, const AABB& root) {
+    if (!(sp_.wall > 0.f)) return;
+    wall_.assign(scene_.num_triangles(), 0);
+    const Vec3 n = root.extent() * sp_.wall;
+    for (const auto& r : refs) {
+      const Vec3 e = r.box.extent();
+      if (int(e.x >= n.x) + int(e.y >= n.y) + int(e.z >= n.z) >= 2) wall_[r.prim] = 1;
+    }
+  }
+  bool is_wall(const SpatialRef& r) const { return !wall_.empty() && wall_[r.prim]; }
+
   // Chopped binning (Stich et al. §4.1): a reference enters its first bin and exits its last;
   // in every bin it spans it adds the bounds of its part clipped to that bin.
   Split spatial_split(const std::vector<SpatialRef>& refs, const AABB& box) {
@@ -307,6 +321,12 @@ class SpatialBuilder {
     AABB* sbox = parts_;
     std::fill(sbox, sbox + sbins_, AABB{});
     for (const auto& r : refs) {
+      if (is_wall(r)) {  // never clipped: whole, in the bin of its centroid
+        Bin& b = bins[ab.bin(r.box.centre()[A])];
+        b.count++, b.exits++;
+        b.box.grow(r.box);
+        continue;
+      }
       const int b0 = ab.bin(r.box.lo[A]), b1 = ab.bin(r.box.hi[A]);
       bins[b0].count++;
       bins[b1].exits++;
@@ -334,6 +354,11 @@ class SpatialBuilder {
     std::vector<const SpatialRef*> straddle;
     const AxisBins ab(*this, box, a);
     for (const auto& r : refs) {
+      if (is_wall(r)) {  // the side of its centroid's bin, as binned
+        if (ab.bin(r.box.centre()[a]) < s.pos) left.push_back(r), lb.grow(r.box);
+        else right.push_back(r), rb.grow(r.box);
+        continue;
+      }
       const int b0 = ab.bin(r.box.lo[a]), b1 = ab.bin(r.box.hi[a]);
       if (b1 < s.pos) {
         left.push_back(r);
@@ -397,6 +422,7 @@ class SpatialBuilder {
   std::vector<Bin> obins3_[3];  // object_split's bins per axis
   AABB parts_[kMaxChopSlabs];  // spatial_bins' boxes of the chopped parts (sbins_ <= 256)
   std::vector<Vec3> cen_;  // object_split's centroids
+  std::vector<uint8_t> wall_;  // by triangle id: never clipped (empty: wall = 0)
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;
 };

@@ -117,6 +117,40 @@ TEST(SpatialBVH, CoversEveryTriangleAndLowersSah) {
   EXPECT_LT(sbvh.stats.sah_cost, plain.stats.sah_cost * 0.9);
 }
 
+// SpatialSplitParams::wall: the built-in stadium is an enclosure (floor, roof and four walls of a
+// 1000 x 150 x 600 box around stands and a teapot). Its triangles that span the scene on two axes
+// are never clipped (one reference each); with wall = 0 (every triangle may be clipped, Stich et
+// al. as published) the same build clips the enclosure. CoversEveryTriangleAndLowersSah checks
+// that the default still clips the other large triangles (small_on_large's slivers).
+TEST(SpatialBVH, EnclosureIsNeverClipped) {
+  const Scene s = make_builtin_scene("stadium");
+  const Vec3 root = s.bounds().extent();
+  std::vector<uint32_t> walls;
+  for (uint32_t t = 0; t < s.num_triangles(); ++t) {
+    const Vec3 e = s.triangle_bounds(t).extent();
+    if (int(e.x >= 0.8f * root.x) + int(e.y >= 0.8f * root.y) + int(e.z >= 0.8f * root.z) >= 2) walls.push_back(t);
+  }
+  ASSERT_GE(walls.size(), 12u);  // the enclosure's six faces, two triangles each
+  BVHBuildParams p;
+  SpatialSplitParams sp;
+  ASSERT_EQ(sp.wall, 0.8f);
+  const BVH b = build_spatial_bvh(s, p, sp);
+  check_spatial(s, b, p.max_leaf, sp);
+  const Walk w(b, s.num_triangles());
+  size_t wall_refs = 0;
+  for (uint32_t t : walls) {
+    wall_refs += w.leaves_of[t].size();
+    EXPECT_EQ(w.leaves_of[t].size(), 1u) << "enclosure triangle " << t << " was clipped";
+  }
+  sp.wall = 0;
+  const BVH all = build_spatial_bvh(s, p, sp);
+  check_spatial(s, all, p.max_leaf, sp);
+  const Walk wa(all, s.num_triangles());
+  size_t clipped_refs = 0;
+  for (uint32_t t : walls) clipped_refs += wa.leaves_of[t].size();
+  EXPECT_GT(clipped_refs, wall_refs) << "wall = 0 should clip the enclosure";
+}
+
 TEST(SpatialBVH, ZeroBudgetIsAnObjectSplitBvh) {
   const Scene s = small_on_large(1500, 5);
   BVHBuildParams p;

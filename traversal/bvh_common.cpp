@@ -2,16 +2,20 @@
 
 namespace tb {
 
-ParamSpecs bvh_param_specs(int default_leaf) {
+ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
+  const BVHBuildParams d;
   return {int_param("bins", BVHBuildParams{}.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
           int_param("leaf_size", default_leaf, 1, 64, "most triangles in a leaf of the binary BVH"),
-          bool_param("spatial", false,
+          bool_param("spatial", default_spatial,
                      "spatial splits (Stich et al. 2009, structures/bvh_spatial.h): straddling triangles are clipped "
                      "and referenced from both sides"),
           real_param("split_alpha", 1e-5, 0, 1,
                      "spatial splits: tried where the object split's children overlap by more than this fraction of "
                      "the root's surface area"),
-          real_param("split_budget", 1.0, 0, 16, "spatial splits: at most this many extra references per triangle")};
+          real_param("split_budget", 1.0, 0, 16, "spatial splits: at most this many extra references per triangle"),
+          real_param("split_wall", d.split_wall, 0, 1,
+                     "spatial splits: a triangle spanning this fraction of the scene's extent on two axes (a "
+                     "floor, ceiling or wall of the whole scene) is never clipped; 0: every triangle may be")};
 }
 
 BVHBuildParams bvh_params(const SchemeConfig& cfg) {
@@ -21,6 +25,7 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   p.spatial = cfg.get_bool("spatial");
   p.split_alpha = float(cfg.get_real("split_alpha"));
   p.split_budget = float(cfg.get_real("split_budget"));
+  p.split_wall = float(cfg.get_real("split_wall"));
   return p;
 }
 

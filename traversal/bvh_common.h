@@ -9,7 +9,9 @@ namespace tb {
 // The binary BVH's parameters, `bins`, `leaf_size` and the spatial-split ones, as a scheme
 // declares them (its params_<name>() returns these plus its own), and the build parameters read
 // from a config resolved against them.
-ParamSpecs bvh_param_specs(int default_leaf = 4);
+// `default_spatial`: the scheme's default for `spatial` (the 8-wide MBVH schemes build spatial
+// splits by default, docs/PERFORMANCE.md "Spatial splits by default"; the thesis' schemes do not).
+ParamSpecs bvh_param_specs(int default_leaf = 4, bool default_spatial = false);
 BVHBuildParams bvh_params(const SchemeConfig& cfg);
 
 using BVHData = TreeData<BVH>;

@@ -4,7 +4,7 @@ namespace tb {
 
 ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
   const MBVHBuildParams p;
-  return bvh_param_specs(d.leaf_size) +
+  return bvh_param_specs(d.leaf_size, d.spatial) +
          ParamSpecs{int_param("merge", d.merge, 0, 64,
                               "binary subtrees of at most this many triangles become one leaf (0: off; SAH "
                               "collapse: the largest leaf)"),

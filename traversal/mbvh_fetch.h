@@ -19,6 +19,7 @@ struct MBVHDefaults {
   int merge = 4;
   bool sah = false;
   int small = 4;
+  bool spatial = false;  // the binary BVH's spatial splits (bvh_param_specs)
 };
 // mbvh8_single's (and treelet_queue's, which runs its loop on the same cached tree): SAH collapse,
 // leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0): one leaf path
