@@ -25,7 +25,11 @@ struct MBVHDefaults {
 // leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0): one leaf path
 // instead of a branch between 4- and 8-wide blocks that mispredicts; +3 to +8% on bunny, dragon,
 // buddha and lucy (bounce:2), within noise on the architectural scenes, for ~15% more triangle bytes.
-inline constexpr MBVHDefaults kMBVH8Defaults{4, 16, true, 0};
+// Spatial splits by default (structures/bvh_spatial.h, enclosures never clipped): ratio to
+// embree_single 0.98 -> 1.22 on sponza bounce:2, 1.05 -> 1.13 crytek_sponza_partial, 1.05 -> 1.17
+// buddha_100k, no scene slower beyond noise but conference primary (1.45 -> 1.36; docs/PERFORMANCE.md
+// "Spatial splits by default").
+inline constexpr MBVHDefaults kMBVH8Defaults{4, 16, true, 0, true};
 // `bins`, `leaf_size` (binary BVH), `merge`, `collapse` (greedy | sah), `tri_cost`, `small` (0 | 4).
 ParamSpecs mbvh_param_specs(const MBVHDefaults& d);
 // Reads them; a parameter declared with auto_default() (its default depends on another, as
