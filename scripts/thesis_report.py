@@ -221,7 +221,8 @@ EXPLAIN = {
         "after a bounce (the counts printed above: the thesis' reason for its slowdown holds here too), but in "
         "our bvh_ranged a scanned pair is one lane of an 8-wide AVX2 slab test over contiguous rays, and "
         "callgrind counts what an extra pair costs (printed above, Sponza: a few instructions, against "
-        "partition's ~150 per pair it visits): the extra range work adds 1.27x instructions and 0–6% time. "
+        "partition's ~150-170 per pair it visits): the extra range work adds the instruction ratio printed "
+        "above (Sponza) and 0–6% time. "
         "Reproduce: `travbench table bounce --scene S` (--stats columns) and scripts/instruction_counts.sh."),
     "t7.rs_vs_single_deep": (
         "unexplained (see t7.depth3_mbvhrs: our MBVH/RS is 1.1–1.3x single-ray at bounces 2–3 on every scene; "
