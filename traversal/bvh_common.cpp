@@ -4,7 +4,7 @@ namespace tb {
 
 ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
   const BVHBuildParams d;
-  return {int_param("bins", BVHBuildParams{}.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
+  return {int_param("bins", d.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
           int_param("leaf_size", default_leaf, 1, 64, "most triangles in a leaf of the binary BVH"),
           bool_param("spatial", default_spatial,
                      "spatial splits (Stich et al. 2009, structures/bvh_spatial.h): straddling triangles are clipped "
