@@ -1,5 +1,5 @@
-// The BVH packet schemes (bvh_masked, bvh_ranged, bvh_partition; thesis §2.2.2, §3.3) against the
-// reference on packets built to stress what packets add over single rays: mixed direction signs
+// The BVH packet schemes (bvh_masked, bvh_ranged, bvh_partition; thesis §2.2.2, §3.3) and
+// mbvh8_packet (8-ray groups on the MBVH8, Benthin et al. 2012) against the reference on packets built to stress what packets add over single rays: mixed direction signs
 // inside a packet, partial and odd-sized packets, rays whose interval is already shortened,
 // axis-parallel packets with +-0 components, packets far from the origin, the split variant, and
 // every triangle kernel. Also the packet bounds themselves: the frustum and the interval
@@ -39,7 +39,23 @@ SchemeConfig with_params(std::initializer_list<std::pair<const char*, const char
   return c;
 }
 
-// Every packet scheme, with split on and off, matches the reference: at most `max_mismatch`
+// What the packet tests run: each binary packet scheme with split off and on, and mbvh8_packet
+// (8-ray groups on the MBVH8) with the single-ray switch never taken, at one active ray, and always.
+struct Variant {
+  std::string scheme;
+  SchemeConfig cfg;
+  std::string label;
+};
+std::vector<Variant> packet_variants() {
+  std::vector<Variant> v;
+  for (const auto& s : kPacketSchemes)
+    for (const char* split : {"0", "1"}) v.push_back({s, with_params({{"split", split}}), s + " split=" + split});
+  for (const char* sw : {"0", "1", "8"})
+    v.push_back({"mbvh8_packet", with_params({{"switch", sw}}), std::string("mbvh8_packet switch=") + sw});
+  return v;
+}
+
+// Every packet scheme variant (packet_variants) matches the reference: at most `max_mismatch`
 // mismatches and never a leak. With `vs_single`, mismatches are counted against bvh_single (the
 // same kernel one ray at a time) instead: for rays that run inside a surface's plane the float
 // kernel and the double reference may legitimately disagree, and packets must change nothing.
@@ -47,13 +63,12 @@ void expect_all_match(Bench& bench, const RayBatch& batch, const std::string& wh
                       bool vs_single = false) {
   const std::vector<Hit> ref = reference_of(bench, batch);
   const std::vector<Hit> single = vs_single ? trace_with(bench, "bvh_single", batch) : ref;
-  for (const auto& scheme : kPacketSchemes)
-    for (const char* split : {"0", "1"}) {
-      const std::vector<Hit> hits = trace_with(bench, scheme, batch, with_params({{"split", split}}));
-      const Accuracy a = compare_hits(hits, single);
-      EXPECT_LE(a.mismatches, max_mismatch) << scheme << " split=" << split << " on " << what;
-      EXPECT_EQ(compare_hits(hits, ref).false_miss, 0u) << scheme << " split=" << split << " leaks on " << what;
-    }
+  for (const Variant& v : packet_variants()) {
+    const std::vector<Hit> hits = trace_with(bench, v.scheme, batch, v.cfg);
+    const Accuracy a = compare_hits(hits, single);
+    EXPECT_LE(a.mismatches, max_mismatch) << v.label << " on " << what;
+    EXPECT_EQ(compare_hits(hits, ref).false_miss, 0u) << v.label << " leaks on " << what;
+  }
 }
 
 // Regroups a batch into packets whose sizes cycle through `sizes`.
@@ -240,7 +255,7 @@ TEST(PacketSchemes, EveryKernelGivesFiniteResults) {
       cfg.kernel = k;
       const auto single = trace_with(bench, "bvh_single", b, cfg);
       const std::vector<Hit>& want = k == TriKernel::watertight ? bench.reference_hits(spec) : single;
-      for (const auto& scheme : kPacketSchemes) {
+      for (const std::string scheme : {"bvh_masked", "bvh_ranged", "bvh_partition", "mbvh8_packet"}) {
         const auto hits = trace_with(bench, scheme, b, cfg);
         size_t bad = 0;
         for (const Hit& h : hits) {
@@ -274,6 +289,23 @@ TraversalCounts instrumented_counts(Bench& bench, const std::string& scheme, con
   hits.assign(b.size(), Hit{});
   t->trace(b, PacketRange::all(b), hits, probe);
   return c;
+}
+
+// mbvh8_packet's 8-ray groups share their nodes: on primary rays more than 4 of a group's 8 rays
+// per visited interior node on average (never more than 8), and its instrumented path returns the
+// timed path's hits.
+TEST(PacketSchemes, MBVH8PacketGroupsShareNodes) {
+  Bench& bench = bench_for("room");
+  const RayBatch& b = bench.rays(test::small_spec("primary", 64));
+  std::vector<Hit> hits;
+  const TraversalCounts c = instrumented_counts(bench, "mbvh8_packet", b, hits);
+  EXPECT_EQ(c.rays, b.size());
+  const double per_node = double(c.node_ray_visits) / double(c.node_visits);
+  EXPECT_GT(per_node, 4.0);
+  EXPECT_LE(per_node, 8.0);
+  EXPECT_GE(c.leaf_ray_visits, c.leaf_visits);
+  EXPECT_EQ(compare_hits(hits, trace_with(bench, "mbvh8_packet", b)).mismatches, 0u);
+  EXPECT_EQ(compare_hits(hits, bench.reference_hits(test::small_spec("primary", 64))).mismatches, 0u);
 }
 
 // --stats: rays counted once, and per visited node / leaf the number of active rays (thesis

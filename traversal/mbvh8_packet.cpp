@@ -1,0 +1,347 @@
+// mbvh8_packet: 8-ray packets over the 8-wide MBVH — the hybrid traversal of Benthin, Wald, Woop,
+// Ernst and Mark (2012, "Combining single and packet-ray tracing for arbitrary ray distributions on
+// the Intel MIC architecture", §4) that Embree's rtcIntersect8 runs (Wald et al. 2014, "Embree: a
+// kernel framework for efficient CPU ray tracing", §4.2), on mbvh8_single's cached tree (same
+// build parameters and defaults, spatial splits included).
+//
+// Every 8 consecutive rays of the batch (one per AVX2 lane, packet.h's RayGroup) walk the MBVH8
+// together; a stack entry keeps each lane's entry distance of the child, so a popped child is
+// entered only by the lanes whose closest hit still lies beyond it (Embree's per-lane tNear).
+//   * Interior nodes, coherent batches (a common origin; Embree's coherent hint): the group's
+//     interval bounds (GroupIA below) test all 8 children at once, as one interval ray, and order
+//     them; each child they keep is then tested against the active lanes (one 8-lane slab test,
+//     the kernel library's slab<8>) and pushed only if some lane enters it.
+//   * Interior nodes, other batches: every child against the active lanes, ordered by the nearest
+//     lane's entry distance.
+//   * Leaves: each active lane tests the leaf's triangle blocks with mbvh8_single's block test
+//     (block_intersect: one ray against 8 triangles). A leaf is reached by ~3 of the 8 lanes on
+//     primary rays (dragon_100k), so testing each triangle against all 8 lanes instead (the
+//     ray-parallel test of the binary packet schemes) did 2-3x the triangle work (callgrind:
+//     docs/PERFORMANCE.md, "mbvh8_packet").
+//   * When at most `switch` lanes are active at a node, each finishes that subtree alone with
+//     mbvh8_single's loop (mbvh_traverse_from), Benthin et al.'s single-ray switch.
+// A lane's per-ray constants (RayCtx, the block test's TriRay, the loop's NodeRay) are built the
+// first time it needs them: a group that misses the scene after the root builds none.
+//
+// Why it exists: on the scanned models (bunny, dragon, lucy, buddha) and the held-out-shaped
+// scene, the binary BVH packet schemes of the thesis (bvh_ranged, bvh_partition) trace primary
+// rays at 0.75-0.91x embree_packet8 (issue 17); this is Embree's structure for them — 8 rays,
+// 8-wide nodes, single-ray fallback — on travbench's own tree and kernels.
+//
+// Parameters: switch (0..8) and the MBVH build parameters of mbvh8_single.
+#include <optional>
+
+#include "traversal/mbvh_fetch.h"
+#include "traversal/mbvh_traverse.h"
+#include "traversal/packet.h"
+
+namespace tb {
+namespace {
+
+using packet::kW;
+using packet::Packet;
+using packet::RayGroup;
+
+constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // mbvh8_single's cached tree
+constexpr int kDefaultSwitch = 1;
+
+// A pending child of the group: its reference and each lane's entry distance (+inf: the lane does
+// not enter it).
+struct alignas(32) GroupEntry {
+  __m256 tn;
+  uint32_t ref;
+};
+
+// Eight rays of the batch, their hits and their lazily built one-ray constants.
+struct Group {
+  RayGroup G;          // o, inv, tmin, tfar (the closest hit so far; -inf for lanes past the rays)
+  int sign = -1;       // direction sign bits shared by all lanes (x: 1, y: 2, z: 4), else -1
+  bool common = false; // all lanes share one origin (org)
+  float org[3] = {};
+  const Ray* rays = nullptr;
+  uint32_t n = 0;
+  alignas(32) float tf[kW];  // the lanes of G.tfar, kept in step with hit[l].t
+  Hit hit[kW];
+  float tfar_max = 0;  // the largest lane of G.tfar
+  uint32_t ready = 0;  // lanes whose hit, rc and tr are set (a lane's hit record starts with them)
+  std::optional<RayCtx> rc[kW];
+  TriRay<8> tr[kW];
+
+  template <class P>
+  void load(const Ray* r, uint32_t count, P& probe) {
+    rays = r, n = count, ready = 0;
+    __m256 v[8];
+    for (uint32_t l = 0; l < kW; ++l) v[l] = _mm256_loadu_ps(reinterpret_cast<const float*>(&r[std::min(l, n - 1)]));
+    packet::transpose8(v);  // org.x org.y org.z tmin dir.x dir.y dir.z tmax
+    const __m256 one = _mm256_set1_ps(1.f);
+    int s = 0;
+    common = true;
+    for (int a = 0; a < 3; ++a) {
+      G.o[a] = v[a];
+      G.inv[a] = _mm256_div_ps(one, v[4 + a]);  // 1/(+-0) = +-inf, as in RayCtx
+      const int m = _mm256_movemask_ps(G.inv[a]);
+      s = s < 0 || (m != 0 && m != 0xFF) ? -1 : s | (m ? 1 << a : 0);
+      org[a] = r[0].org[a];
+      common &= _mm256_movemask_ps(_mm256_cmp_ps(v[a], _mm256_set1_ps(org[a]), _CMP_EQ_OQ)) == 0xFF;
+    }
+    sign = s;
+    G.tmin = v[3];
+    G.tfar = _mm256_blendv_ps(_mm256_set1_ps(-INFINITY), v[7], packet::lane_mask_ps(n >= kW ? 0xFFu : (1u << n) - 1));
+    _mm256_store_ps(tf, G.tfar);
+    tfar_max = Packet::hmax8(G.tfar);
+    if constexpr (P::enabled) {
+      for (uint32_t l = 0; l < n; ++l) probe.read(&r[l], sizeof(Ray));
+      if (probe.counts) probe.counts->rays += n;
+    }
+  }
+  void prepare_lane(uint32_t l) {
+    if (ready >> l & 1) return;
+    hit[l] = initial_hit(rays[l]);
+    rc[l].emplace(rays[l]);
+    tr[l] = TriRay<8>(*rc[l], rays[l].tmin);
+    ready |= 1u << l;
+  }
+  void sync_lane(uint32_t l) { tf[l] = hit[l].t; }
+  void sync() {
+    G.tfar = _mm256_load_ps(tf);
+    tfar_max = Packet::hmax8(G.tfar);
+  }
+  // A lane that never needed its constants never reached a leaf: it hits nothing.
+  Hit result(uint32_t l) const { return ready >> l & 1 ? finish_hit(hit[l]) : finish_hit(Hit{INFINITY, kNoHit, 0.f, 0.f}); }
+};
+
+// The coherent path's bounds (Embree's packet frustum for coherent rays): per axis the group's
+// origins lie in [o0, o1] and its reciprocal directions in [r0, r1]. A child's near-plane distance
+// for any of the rays is then at least the smallest of the four corner products (pn - o) * r, and
+// its padded far-plane distance at most the largest one times kFarPad: each a rounded product of
+// rounded differences, and rounding is monotonic, so the bounds hold for the very values slab<8>
+// computes per ray (kernels.h, Ize's padded far). One 8-wide test of a node's children thus skips
+// only children that no ray of the group enters by its own test. Unusable (init false) when the
+// lanes' direction signs differ or a reciprocal direction is infinite, zero or NaN (a corner
+// product would be NaN).
+struct GroupIA {
+  __m256 o0[3], o1[3], r0[3], r1[3], tmin;
+  bool neg[3];
+  bool init(const Group& grp) {
+    if (grp.sign < 0) return false;
+    const RayGroup& G = grp.G;
+    const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+    __m256 ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+    for (int a = 0; a < 3; ++a) {
+      const __m256 ar = _mm256_and_ps(G.inv[a], absmask);
+      ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(ar, _mm256_setzero_ps(), _CMP_GT_OQ),
+                                           _mm256_cmp_ps(ar, _mm256_set1_ps(INFINITY), _CMP_LT_OQ)));
+    }
+    if (_mm256_movemask_ps(ok) != 0xFF) return false;
+    for (int a = 0; a < 3; ++a) {
+      neg[a] = (grp.sign >> a) & 1;
+      if (grp.common) {
+        o0[a] = o1[a] = _mm256_set1_ps(grp.org[a]);
+      } else {
+        o0[a] = _mm256_set1_ps(Packet::hmin8(G.o[a])), o1[a] = _mm256_set1_ps(Packet::hmax8(G.o[a]));
+      }
+      r0[a] = _mm256_set1_ps(Packet::hmin8(G.inv[a])), r1[a] = _mm256_set1_ps(Packet::hmax8(G.inv[a]));
+    }
+    tmin = _mm256_set1_ps(Packet::hmin8(G.tmin));
+    return true;
+  }
+  // The children some ray may enter before tfar (all-ones lanes) and their entry bounds n.
+  [[gnu::always_inline]] __m256 test(const MBVHNode<8>& nd, float tfar, __m256& n) const {
+    const __m256 pad = _mm256_set1_ps(kFarPad);
+    __m256 lo = tmin, hi = _mm256_set1_ps(tfar);
+    for (int a = 0; a < 3; ++a) {
+      const __m256 bl = _mm256_load_ps(nd.box[a]), bh = _mm256_load_ps(nd.box[3 + a]);
+      const __m256 pn = neg[a] ? bh : bl, pf = neg[a] ? bl : bh;
+      const __m256 n0 = _mm256_sub_ps(pn, o1[a]), n1 = _mm256_sub_ps(pn, o0[a]);
+      const __m256 f0 = _mm256_sub_ps(pf, o1[a]), f1 = _mm256_sub_ps(pf, o0[a]);
+      const __m256 tn = _mm256_min_ps(_mm256_min_ps(_mm256_mul_ps(n0, r0[a]), _mm256_mul_ps(n0, r1[a])),
+                                      _mm256_min_ps(_mm256_mul_ps(n1, r0[a]), _mm256_mul_ps(n1, r1[a])));
+      const __m256 tf = _mm256_max_ps(_mm256_max_ps(_mm256_mul_ps(f0, r0[a]), _mm256_mul_ps(f0, r1[a])),
+                                      _mm256_max_ps(_mm256_mul_ps(f1, r0[a]), _mm256_mul_ps(f1, r1[a])));
+      lo = _mm256_max_ps(tn, lo);
+      hi = _mm256_min_ps(_mm256_mul_ps(tf, pad), hi);
+    }
+    n = lo;
+    return _mm256_cmp_ps(lo, hi, _CMP_LE_OQ);
+  }
+};
+
+// The lanes `act` of the group against child c of node nd: the entering lanes (all-ones) and their
+// entry distances tn. Planes are selected once for the group when its lanes share direction signs
+// (scalar offsets with a common origin), per lane otherwise: packet_box.h's group_box, keeping tn.
+[[gnu::always_inline]] inline __m256 child_test(const Group& grp, const MBVHNode<8>& nd, uint32_t c, __m256 act,
+                                                __m256& tn) {
+  const RayGroup& G = grp.G;
+  __m256 xn[3], xf[3];
+  for (int a = 0; a < 3; ++a) {
+    const float lo = nd.box[a][c], hi = nd.box[3 + a][c];
+    if (grp.sign >= 0) {
+      const bool neg = (grp.sign >> a) & 1;
+      const float pn = neg ? hi : lo, pf = neg ? lo : hi;
+      if (grp.common) {
+        xn[a] = _mm256_set1_ps(pn - grp.org[a]);
+        xf[a] = _mm256_set1_ps(pf - grp.org[a]);
+      } else {
+        xn[a] = _mm256_sub_ps(_mm256_set1_ps(pn), G.o[a]);
+        xf[a] = _mm256_sub_ps(_mm256_set1_ps(pf), G.o[a]);
+      }
+    } else {
+      const __m256 l = _mm256_sub_ps(_mm256_set1_ps(lo), G.o[a]), h = _mm256_sub_ps(_mm256_set1_ps(hi), G.o[a]);
+      xn[a] = _mm256_blendv_ps(l, h, G.inv[a]);
+      xf[a] = _mm256_blendv_ps(h, l, G.inv[a]);
+    }
+  }
+  return _mm256_and_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn), act);
+}
+
+class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
+ public:
+  explicit MBVH8Packet(const SchemeConfig& cfg)
+      : MBVHScheme(cfg, kDefaults), switch_(uint32_t(cfg.get_int("switch"))) {}
+  std::string_view name() const override { return "mbvh8_packet"; }
+
+  template <class P>
+  void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
+    const MBVHData<8, 8>& d = std::get<0>(data_.data);
+    const size_t depth = size_t(7) * d.mbvh->stats.max_depth + 10;
+    auto grp = std::make_unique<Group>();
+    std::vector<GroupEntry> stack(depth);
+    std::vector<MBVHStackEntry> single(depth);
+    const uint32_t end = batch.packet_begin[range.last];
+    dispatch_kernel(cfg_.kernel, [&](auto k) {
+      constexpr TriKernel K = decltype(k)::value;
+      auto go = [&](auto order, auto coherent) {
+        for (uint32_t i = batch.packet_begin[range.first]; i < end; i += kW) {
+          Group& g = *grp;
+          g.load(&batch.rays[i], std::min<uint32_t>(kW, end - i), probe);
+          GroupIA ia;
+          if (decltype(coherent)::value && ia.init(g))
+            trace_group<K, decltype(order)::value, true>(d, g, stack.data(), single.data(), &ia, probe);
+          else
+            trace_group<K, decltype(order)::value, false>(d, g, stack.data(), single.data(), nullptr, probe);
+          for (uint32_t l = 0; l < g.n; ++l) {
+            hits[i + l] = g.result(l);
+            probe.write(&hits[i + l], sizeof(Hit));
+          }
+        }
+      };
+      // The single-ray loop's child order as mbvh8_single's `auto` (mbvh_traverse.h, ChildOrder).
+      if (batch.common_origin)
+        go(std::integral_constant<ChildOrder, ChildOrder::branching>{}, std::true_type{});
+      else if constexpr (K == TriKernel::watertight)
+        go(std::integral_constant<ChildOrder, ChildOrder::sort_always>{}, std::false_type{});
+      else
+        go(std::integral_constant<ChildOrder, ChildOrder::branching>{}, std::false_type{});
+    });
+  }
+
+ private:
+  template <TriKernel K, ChildOrder O, bool kIA, class P>
+  void trace_group(const MBVHData<8, 8>& d, Group& g, GroupEntry* stack, MBVHStackEntry* single, const GroupIA* ia,
+                   P& probe) const {
+    const MBVH<8, 8>& m = *d.mbvh;
+    const __m256 inf = _mm256_set1_ps(INFINITY);
+    uint32_t sp = 0, cur = 0;
+    __m256 tn_cur = g.G.tmin;  // lanes past the batch's rays have tfar = -inf: never active
+    for (;;) {
+      // The lanes that still enter `cur`: its entry distance lies before their closest hit (a hit
+      // at the entry distance or beyond cannot be closer).
+      const __m256 act = _mm256_cmp_ps(tn_cur, g.G.tfar, _CMP_LT_OQ);
+      const uint32_t active = uint32_t(_mm256_movemask_ps(act));
+      if (active) {
+        const uint32_t count = uint32_t(std::popcount(active));
+        if (count <= switch_) {
+          for (uint32_t a = active; a; a &= a - 1) finish_lane<K, O>(d, g, uint32_t(std::countr_zero(a)), cur, single, probe);
+          g.sync();
+        } else if (mbvh_ref::is_leaf(cur)) {
+          probe_leaf(m, cur, probe, count);
+          for (uint32_t a = active; a; a &= a - 1) {
+            const uint32_t l = uint32_t(std::countr_zero(a));
+            g.prepare_lane(l);
+            leaf_test<8, 8, K>(m, d.tris.get(), g.tr[l], &*g.rc[l], cur, g.hit[l]);
+            g.sync_lane(l);
+          }
+          g.sync();
+        } else {
+          const MBVHNode<8>& nd = m.nodes[cur];
+          probe.node(&nd, sizeof(nd), count);
+          if constexpr (kIA) {
+            // The interval test culls and orders the children (nearest bound first); each child it
+            // keeps is pushed, far to near, if some active lane's own test enters it.
+            __m256 bound;
+            const __m256 maybe = ia->test(nd, g.tfar_max, bound);
+            const int mask = _mm256_movemask_ps(maybe);
+            alignas(32) uint32_t keys[8];
+            _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(bound, maybe)));
+            for (int j = std::popcount(unsigned(mask)); j-- > 0;) {
+              const uint32_t c = keys[j] & 7;
+              __m256 tn;
+              const __m256 in = child_test(g, nd, c, act, tn);
+              if (_mm256_testz_ps(in, in)) continue;
+              if (j > 0) prefetch_ref(m, nd.ref[c]);
+              push(stack, sp, _mm256_blendv_ps(inf, tn, in), nd.ref[c], probe);
+            }
+          } else {
+            // Every child against the active lanes, ordered by the nearest lane's entry distance.
+            __m256 tns[8];
+            float key[8];
+            uint32_t idx[8], cnt = 0;
+            for (uint32_t c = 0; c < nd.num_children; ++c) {
+              __m256 tn;
+              const __m256 in = child_test(g, nd, c, act, tn);
+              if (_mm256_testz_ps(in, in)) continue;
+              tns[c] = _mm256_blendv_ps(inf, tn, in);
+              key[c] = Packet::hmin8(tns[c]);
+              uint32_t j = cnt++;
+              for (; j > 0 && key[idx[j - 1]] > key[c]; --j) idx[j] = idx[j - 1];
+              idx[j] = c;
+            }
+            for (uint32_t j = cnt; j-- > 0;) {
+              if (j > 0) prefetch_ref(m, nd.ref[idx[j]]);
+              push(stack, sp, tns[idx[j]], nd.ref[idx[j]], probe);
+            }
+          }
+        }
+      }
+      if (sp == 0) return;
+      --sp;
+      probe.read(&stack[sp], sizeof(GroupEntry));
+      cur = stack[sp].ref;
+      tn_cur = stack[sp].tn;
+    }
+  }
+
+  template <class P>
+  [[gnu::always_inline]] static void push(GroupEntry* stack, uint32_t& sp, __m256 tn, uint32_t ref, P& probe) {
+    stack[sp].tn = tn;
+    stack[sp].ref = ref;
+    probe.write(&stack[sp], sizeof(GroupEntry));
+    ++sp;
+  }
+
+  // Lane l leaves the group at subtree `ref` and finishes it alone with mbvh8_single's loop.
+  template <TriKernel K, ChildOrder O, class P>
+  static void finish_lane(const MBVHData<8, 8>& d, Group& g, uint32_t l, uint32_t ref, MBVHStackEntry* stack,
+                          P& probe) {
+    g.prepare_lane(l);
+    const NodeRay<8> nr(*g.rc[l], g.rays[l].tmin);
+    MBVHCursor at{ref, 0};
+    mbvh_traverse_from<8, 8, K, O>(*d.mbvh, d.tris.get(), nr, g.tr[l], &*g.rc[l], at, g.hit[l], stack, probe,
+                                   NeverLeave{});
+    g.sync_lane(l);
+  }
+
+  uint32_t switch_;
+};
+
+}  // namespace
+
+std::unique_ptr<Traverser> make_mbvh8_packet(const SchemeConfig& cfg) { return std::make_unique<MBVH8Packet>(cfg); }
+ParamSpecs params_mbvh8_packet() {
+  return mbvh_param_specs(kDefaults) +
+         ParamSpecs{int_param("switch", kDefaultSwitch, 0, 8,
+                              "a group with at most this many active rays at a node finishes that subtree one ray at "
+                              "a time (mbvh8_single's loop); 0: never, 8: always")};
+}
+
+}  // namespace tb
