@@ -28,7 +28,8 @@
 // rays at 0.75-0.91x embree_packet8 (issue 17); this is Embree's structure for them — 8 rays,
 // 8-wide nodes, single-ray fallback — on travbench's own tree and kernels.
 //
-// Parameters: switch (0..8) and the MBVH build parameters of mbvh8_single.
+// Parameters: switch (0..8; default 0 on common-origin batches, 8 on others: measured, see
+// kSwitchCoherent) and the MBVH build parameters of mbvh8_single.
 #include <optional>
 
 #include "traversal/mbvh_fetch.h"
@@ -43,7 +44,13 @@ using packet::Packet;
 using packet::RayGroup;
 
 constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // mbvh8_single's cached tree
-constexpr int kDefaultSwitch = 1;
+// `switch` by default: 0 on coherent batches (a common origin) and 8 on the others. Measured, ratio
+// to embree_packet8 on dragon_100k primary 512x512 (interleaved, 3 rounds): switch 0 / 1 / 2 =
+// 0.95 / 0.93 / 0.87; on bounce:2, ratio to mbvh8_single: switch 0 / 1 / 2 / 4 / 6 / 8 = 0.45 /
+// 0.58 / 0.66 / 0.71 / 0.81 / 0.87 — incoherent rays share too few nodes for 8-ray groups to pay,
+// so each is traced alone from the root, as Embree's hybrid traversal does when few lanes are
+// active (docs/PERFORMANCE.md, "mbvh8_packet").
+constexpr uint32_t kSwitchCoherent = 0, kSwitchIncoherent = 8;
 
 // A pending child of the group: its reference and each lane's entry distance (+inf: the lane does
 // not enter it).
@@ -197,7 +204,7 @@ struct GroupIA {
 class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
  public:
   explicit MBVH8Packet(const SchemeConfig& cfg)
-      : MBVHScheme(cfg, kDefaults), switch_(uint32_t(cfg.get_int("switch"))) {}
+      : MBVHScheme(cfg, kDefaults), switch_(cfg.find_int("switch")) {}
   std::string_view name() const override { return "mbvh8_packet"; }
 
   template <class P>
@@ -208,6 +215,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
     std::vector<GroupEntry> stack(depth);
     std::vector<MBVHStackEntry> single(depth);
     const uint32_t end = batch.packet_begin[range.last];
+    const uint32_t sw = switch_ ? uint32_t(*switch_) : batch.common_origin ? kSwitchCoherent : kSwitchIncoherent;
     dispatch_kernel(cfg_.kernel, [&](auto k) {
       constexpr TriKernel K = decltype(k)::value;
       auto go = [&](auto order, auto coherent) {
@@ -216,9 +224,9 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
           g.load(&batch.rays[i], std::min<uint32_t>(kW, end - i), probe);
           GroupIA ia;
           if (decltype(coherent)::value && ia.init(g))
-            trace_group<K, decltype(order)::value, true>(d, g, stack.data(), single.data(), &ia, probe);
+            trace_group<K, decltype(order)::value, true>(d, g, sw, stack.data(), single.data(), &ia, probe);
           else
-            trace_group<K, decltype(order)::value, false>(d, g, stack.data(), single.data(), nullptr, probe);
+            trace_group<K, decltype(order)::value, false>(d, g, sw, stack.data(), single.data(), nullptr, probe);
           for (uint32_t l = 0; l < g.n; ++l) {
             hits[i + l] = g.result(l);
             probe.write(&hits[i + l], sizeof(Hit));
@@ -237,8 +245,8 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
 
  private:
   template <TriKernel K, ChildOrder O, bool kIA, class P>
-  void trace_group(const MBVHData<8, 8>& d, Group& g, GroupEntry* stack, MBVHStackEntry* single, const GroupIA* ia,
-                   P& probe) const {
+  static void trace_group(const MBVHData<8, 8>& d, Group& g, uint32_t sw, GroupEntry* stack, MBVHStackEntry* single,
+                          const GroupIA* ia, P& probe) {
     const MBVH<8, 8>& m = *d.mbvh;
     const __m256 inf = _mm256_set1_ps(INFINITY);
     uint32_t sp = 0, cur = 0;
@@ -250,7 +258,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
       const uint32_t active = uint32_t(_mm256_movemask_ps(act));
       if (active) {
         const uint32_t count = uint32_t(std::popcount(active));
-        if (count <= switch_) {
+        if (count <= sw) {
           for (uint32_t a = active; a; a &= a - 1) finish_lane<K, O>(d, g, uint32_t(std::countr_zero(a)), cur, single, probe);
           g.sync();
         } else if (mbvh_ref::is_leaf(cur)) {
@@ -331,7 +339,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
     g.sync_lane(l);
   }
 
-  uint32_t switch_;
+  std::optional<int> switch_;  // unset: kSwitchCoherent or kSwitchIncoherent by batch
 };
 
 }  // namespace
@@ -339,9 +347,10 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
 std::unique_ptr<Traverser> make_mbvh8_packet(const SchemeConfig& cfg) { return std::make_unique<MBVH8Packet>(cfg); }
 ParamSpecs params_mbvh8_packet() {
   return mbvh_param_specs(kDefaults) +
-         ParamSpecs{int_param("switch", kDefaultSwitch, 0, 8,
-                              "a group with at most this many active rays at a node finishes that subtree one ray at "
-                              "a time (mbvh8_single's loop); 0: never, 8: always")};
+         ParamSpecs{auto_default(int_param("switch", 0, 0, 8,
+                                           "a group with at most this many active rays at a node finishes that subtree "
+                                           "one ray at a time (mbvh8_single's loop); 0: never, 8: always"),
+                                 "0 for common-origin batches, 8 for the others")};
 }
 
 }  // namespace tb
