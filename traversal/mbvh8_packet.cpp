@@ -70,13 +70,16 @@ struct Group {
   alignas(32) float tf[kW];  // the lanes of G.tfar, kept in step with hit[l].t
   Hit hit[kW];
   float tfar_max = 0;  // the largest lane of G.tfar
-  uint32_t ready = 0;  // lanes whose hit, rc and tr are set (a lane's hit record starts with them)
+  uint32_t ready = 0;  // lanes whose hit and tr are set (a lane's hit record starts with them)
+  uint32_t rc_ready = 0;  // lanes whose rc is built
+  alignas(32) int32_t kx[kW], ky[kW], kz[kW];  // shear8's
+  alignas(32) float sx[kW], sy[kW], sz[kW];
   std::optional<RayCtx> rc[kW];
   TriRay<8> tr[kW];
 
   template <class P>
   void load(const Ray* r, uint32_t count, P& probe) {
-    rays = r, n = count, ready = 0;
+    rays = r, n = count, ready = 0, rc_ready = 0;
     __m256 v[8];
     for (uint32_t l = 0; l < kW; ++l) v[l] = _mm256_loadu_ps(reinterpret_cast<const float*>(&r[std::min(l, n - 1)]));
     packet::transpose8(v);  // org.x org.y org.z tmin dir.x dir.y dir.z tmax
@@ -101,12 +104,56 @@ struct Group {
       if (probe.counts) probe.counts->rays += n;
     }
   }
+  // Lane l's hit record and block-test constants (its RayCtx only where a kernel or the one-ray
+  // loop reads it: rc_of). The shear of all 8 lanes is computed once, in SIMD, when the first lane
+  // needs it (shear8): the scalar RayCtx per lane cost ~200 instructions, most of a primary ray
+  // on the held-out-shaped scene (callgrind).
   void prepare_lane(uint32_t l) {
     if (ready >> l & 1) return;
+    if (!ready) shear8();
     hit[l] = initial_hit(rays[l]);
-    rc[l].emplace(rays[l]);
-    tr[l] = TriRay<8>(*rc[l], rays[l].tmin);
+    tr[l] = TriRay<8>(rays[l].org, rays[l].dir, kx[l], ky[l], kz[l], sx[l], sy[l], sz[l], rays[l].tmin);
     ready |= 1u << l;
+  }
+  const RayCtx& rc_of(uint32_t l) {
+    if (!(rc_ready >> l & 1)) rc[l].emplace(rays[l]), rc_ready |= 1u << l;
+    return *rc[l];
+  }
+  // RayCtx's watertight shear (kernels.h, Woop et al. 2013) for the 8 lanes at once: the same
+  // comparisons pick the same axes (kz the dominant one, kx and ky swapped where dir[kz] < 0) and
+  // the same divisions give the same sx, sy, sz, so each lane's TriRay equals TriRay(RayCtx(ray)).
+  void shear8() {
+    const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+    alignas(32) float dl[3][kW];
+    __m256 d[3], a[3];
+    for (int k = 0; k < 3; ++k) {
+      for (uint32_t l = 0; l < kW; ++l) dl[k][l] = rays[std::min(l, n - 1)].dir[k];
+      d[k] = _mm256_load_ps(dl[k]);
+      a[k] = _mm256_and_ps(d[k], absmask);
+    }
+    const __m256 xy = _mm256_cmp_ps(a[0], a[1], _CMP_GE_OQ), xz = _mm256_cmp_ps(a[0], a[2], _CMP_GE_OQ),
+                 yz = _mm256_cmp_ps(a[1], a[2], _CMP_GE_OQ);
+    const __m256i z0 = _mm256_castps_si256(_mm256_and_ps(xy, xz)), z1 = _mm256_castps_si256(_mm256_andnot_ps(xy, yz));
+    // kz = 0, 1 or 2; kx = kz + 1, ky = kz + 2 (mod 3).
+    const __m256i two = _mm256_set1_epi32(2), one = _mm256_set1_epi32(1), zero = _mm256_setzero_si256();
+    const __m256i vkz = _mm256_blendv_epi8(_mm256_blendv_epi8(two, one, z1), zero, z0);
+    __m256i vkx = _mm256_blendv_epi8(_mm256_blendv_epi8(zero, two, z1), one, z0);
+    __m256i vky = _mm256_blendv_epi8(_mm256_blendv_epi8(one, zero, z1), two, z0);
+    auto pick = [&](__m256i k) {
+      const __m256 m1 = _mm256_castsi256_ps(_mm256_cmpeq_epi32(k, one)), m2 = _mm256_castsi256_ps(_mm256_cmpeq_epi32(k, two));
+      return _mm256_blendv_ps(_mm256_blendv_ps(d[0], d[1], m1), d[2], m2);
+    };
+    const __m256 dz = pick(vkz);
+    const __m256i neg = _mm256_castps_si256(_mm256_cmp_ps(dz, _mm256_setzero_ps(), _CMP_LT_OQ));
+    const __m256i tx = vkx;
+    vkx = _mm256_blendv_epi8(vkx, vky, neg);
+    vky = _mm256_blendv_epi8(vky, tx, neg);
+    const __m256 vsx = _mm256_div_ps(pick(vkx), dz), vsy = _mm256_div_ps(pick(vky), dz);
+    const __m256 vsz = _mm256_div_ps(_mm256_set1_ps(1.f), dz);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(kx), vkx);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(ky), vky);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(kz), vkz);
+    _mm256_store_ps(sx, vsx), _mm256_store_ps(sy, vsy), _mm256_store_ps(sz, vsz);
   }
   void sync_lane(uint32_t l) { tf[l] = hit[l].t; }
   void sync() {
@@ -266,7 +313,8 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
           for (uint32_t a = active; a; a &= a - 1) {
             const uint32_t l = uint32_t(std::countr_zero(a));
             g.prepare_lane(l);
-            leaf_test<8, 8, K>(m, d.tris.get(), g.tr[l], &*g.rc[l], cur, g.hit[l]);
+            leaf_test<8, 8, K>(m, d.tris.get(), g.tr[l], K == TriKernel::watertight ? nullptr : &g.rc_of(l), cur,
+                               g.hit[l]);
             g.sync_lane(l);
           }
           g.sync();
@@ -332,9 +380,10 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
   static void finish_lane(const MBVHData<8, 8>& d, Group& g, uint32_t l, uint32_t ref, MBVHStackEntry* stack,
                           P& probe) {
     g.prepare_lane(l);
-    const NodeRay<8> nr(*g.rc[l], g.rays[l].tmin);
+    const RayCtx& rc = g.rc_of(l);
+    const NodeRay<8> nr(rc, g.rays[l].tmin);
     MBVHCursor at{ref, 0};
-    mbvh_traverse_from<8, 8, K, O>(*d.mbvh, d.tris.get(), nr, g.tr[l], &*g.rc[l], at, g.hit[l], stack, probe,
+    mbvh_traverse_from<8, 8, K, O>(*d.mbvh, d.tris.get(), nr, g.tr[l], &rc, at, g.hit[l], stack, probe,
                                    NeverLeave{});
     g.sync_lane(l);
   }
