@@ -308,6 +308,23 @@ TEST(PacketSchemes, MBVH8PacketGroupsShareNodes) {
   EXPECT_EQ(compare_hits(hits, bench.reference_hits(test::small_spec("primary", 64))).mismatches, 0u);
 }
 
+// mbvh8_packet's leaves (per-lane block tests, or one triangle against all lanes where a leaf has
+// few triangles and many lanes) compute the one-ray test's float and double operations lane by
+// lane: every ray's hit distance equals mbvh8_single's bit for bit (the triangle may differ only on
+// an exact tie, which the traversal order decides). Stadium and room have big floor and wall
+// triangles that many lanes reach together (the ray-parallel leaf path).
+TEST(PacketSchemes, MBVH8PacketDistancesEqualSingleRay) {
+  for (const std::string scene : {"stadium", "room"})
+    for (const char* w : {"primary", "bounce:1", "divergence:4"}) {
+      Bench& bench = bench_for(scene);
+      const RayBatch& b = bench.rays(test::small_spec(w, 96));
+      const auto single = trace_with(bench, "mbvh8_single", b), packet = trace_with(bench, "mbvh8_packet", b);
+      size_t differ = 0;
+      for (size_t i = 0; i < b.size(); ++i) differ += std::bit_cast<uint32_t>(single[i].t) != std::bit_cast<uint32_t>(packet[i].t);
+      EXPECT_EQ(differ, 0u) << scene << " " << w;
+    }
+}
+
 // --stats: rays counted once, and per visited node / leaf the number of active rays (thesis
 // Table 8): packets must amortise a node over many rays on primary rays, single rays never.
 TEST(PacketSchemes, StatsCountActiveRays) {

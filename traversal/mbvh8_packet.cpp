@@ -74,6 +74,8 @@ struct Group {
   uint32_t rc_ready = 0;  // lanes whose rc is built
   alignas(32) int32_t kx[kW], ky[kW], kz[kW];  // shear8's
   alignas(32) float sx[kW], sy[kW], sz[kW];
+  __m256 sx8, sy8, d8[3];  // shear8's sx, sy and the lanes' directions, as vectors
+  bool uniform = false;    // every lane has the same kx, ky, kz
   std::optional<RayCtx> rc[kW];
   TriRay<8> tr[kW];
 
@@ -154,6 +156,64 @@ struct Group {
     _mm256_store_si256(reinterpret_cast<__m256i*>(ky), vky);
     _mm256_store_si256(reinterpret_cast<__m256i*>(kz), vkz);
     _mm256_store_ps(sx, vsx), _mm256_store_ps(sy, vsy), _mm256_store_ps(sz, vsz);
+    sx8 = vsx, sy8 = vsy;
+    for (int k = 0; k < 3; ++k) d8[k] = d[k];
+    uniform = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(vkx, _mm256_set1_epi32(kx[0])))) == 0xFF &&
+              _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(vky, _mm256_set1_epi32(ky[0])))) == 0xFF &&
+              _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(vkz, _mm256_set1_epi32(kz[0])))) == 0xFF;
+  }
+
+  // The lanes `active` against the first `count` triangles of block b, one triangle against all
+  // lanes at a time (the ray-parallel form of block_intersect, for a leaf with few triangles and
+  // many lanes: the held-out-shaped scene's ground). Only when every lane shares its shear axes
+  // (uniform): each lane then computes block_intersect's float operations in its order — the
+  // vertex minus the lane's origin, the shear with the lane's sx and sy, watertight_inside — and
+  // the candidates' distances come from the same double plane equation (four lanes at a time, the
+  // triangle's normal hoisted, as packet_tri.h does), so every lane's hit equals the one-ray test's.
+  // Its lanes must be prepared (prepare_lane).
+  template <int BW>
+  void parallel_block(const TriBlock<BW>& b, uint32_t count, uint32_t active) {
+    const int ax = kx[0], ay = ky[0], az = kz[0];
+    for (uint32_t j = 0; j < count; ++j) {
+      __m256 P[3][3];  // vertex c, axis a, minus each lane's origin
+      for (int c = 0; c < 3; ++c)
+        for (int a = 0; a < 3; ++a) P[c][a] = _mm256_sub_ps(_mm256_set1_ps(b.v[c][a][j]), G.o[a]);
+      const __m256 Ax = shear<8>(P[0][ax], sx8, P[0][az]), Ay = shear<8>(P[0][ay], sy8, P[0][az]);
+      const __m256 Bx = shear<8>(P[1][ax], sx8, P[1][az]), By = shear<8>(P[1][ay], sy8, P[1][az]);
+      const __m256 Cx = shear<8>(P[2][ax], sx8, P[2][az]), Cy = shear<8>(P[2][ay], sy8, P[2][az]);
+      __m256 U, V, W, det;
+      uint32_t m = uint32_t(_mm256_movemask_ps(watertight_inside<8>(Ax, Ay, Bx, By, Cx, Cy, U, V, W, det))) & active;
+      const uint32_t prim = b.prim[j];
+      for (uint32_t k = m; k; k &= k - 1)  // a lane's closest hit again: the same t (block_intersect)
+        if (hit[std::countr_zero(k)].prim == prim) m &= ~(1u << std::countr_zero(k));
+      if (!m) continue;
+      using D = simd::D4v;
+      const Vec3D<double> v0{b.v[0][0][j], b.v[0][1][j], b.v[0][2][j]};
+      const Vec3D<double> nd = plane_normal(v0, Vec3D<double>{b.v[1][0][j], b.v[1][1][j], b.v[1][2][j]},
+                                            Vec3D<double>{b.v[2][0][j], b.v[2][1][j], b.v[2][2][j]});
+      const Vec3D<D> n{D(nd.x), D(nd.y), D(nd.z)};
+      alignas(32) float ts[kW], us[kW], vs[kW], ws[kW], dets[kW], azs[kW], bzs[kW], czs[kW];
+      uint32_t parallel = 0;
+      for (int h = 0; h < 2; ++h) {
+        auto half = [h](__m256 v) { return D(h ? _mm256_extractf128_ps(v, 1) : _mm256_castps256_ps128(v)); };
+        const D dn = plane_dot(n, Vec3D<D>{half(d8[0]), half(d8[1]), half(d8[2])});
+        const D num = plane_dot(n, Vec3D<D>{D(v0.x) - half(G.o[0]), D(v0.y) - half(G.o[1]), D(v0.z) - half(G.o[2])});
+        parallel |= uint32_t(dn.zero_mask()) << (4 * h);
+        _mm_store_ps(ts + 4 * h, (num / dn).to_float());
+      }
+      _mm256_store_ps(us, U), _mm256_store_ps(vs, V), _mm256_store_ps(ws, W), _mm256_store_ps(dets, det);
+      if (parallel & m) {
+        _mm256_store_ps(azs, P[0][az]), _mm256_store_ps(bzs, P[1][az]), _mm256_store_ps(czs, P[2][az]);
+      }
+      for (; m; m &= m - 1) {
+        const uint32_t l = uint32_t(std::countr_zero(m));
+        const float inv_det = 1.f / dets[l];
+        const float t = parallel >> l & 1 ? sheared_distance<1>(sz[l], us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det)
+                                          : ts[l];
+        if (!(t >= rays[l].tmin && t < hit[l].t)) continue;
+        hit[l] = Hit{t, prim, vs[l] * inv_det, ws[l] * inv_det};
+      }
+    }
   }
   void sync_lane(uint32_t l) { tf[l] = hit[l].t; }
   void sync() {
@@ -161,7 +221,7 @@ struct Group {
     tfar_max = Packet::hmax8(G.tfar);
   }
   // A lane that never needed its constants never reached a leaf: it hits nothing.
-  Hit result(uint32_t l) const { return ready >> l & 1 ? finish_hit(hit[l]) : finish_hit(Hit{INFINITY, kNoHit, 0.f, 0.f}); }
+  [[gnu::always_inline]] Hit result(uint32_t l) const { return ready >> l & 1 ? finish_hit(hit[l]) : finish_hit(Hit{INFINITY, kNoHit, 0.f, 0.f}); }
 };
 
 // The coherent path's bounds (Embree's packet frustum for coherent rays): per axis the group's
@@ -175,7 +235,7 @@ struct Group {
 // product would be NaN).
 struct GroupIA {
   __m256 o0[3], o1[3], r0[3], r1[3], tmin;
-  bool neg[3];
+  bool neg[3], common = false;
   bool init(const Group& grp) {
     if (grp.sign < 0) return false;
     const RayGroup& G = grp.G;
@@ -187,6 +247,7 @@ struct GroupIA {
                                            _mm256_cmp_ps(ar, _mm256_set1_ps(INFINITY), _CMP_LT_OQ)));
     }
     if (_mm256_movemask_ps(ok) != 0xFF) return false;
+    common = grp.common;
     for (int a = 0; a < 3; ++a) {
       neg[a] = (grp.sign >> a) & 1;
       if (grp.common) {
@@ -203,6 +264,17 @@ struct GroupIA {
   [[gnu::always_inline]] __m256 test(const MBVHNode<8>& nd, float tfar, __m256& n) const {
     const __m256 pad = _mm256_set1_ps(kFarPad);
     __m256 lo = tmin, hi = _mm256_set1_ps(tfar);
+    if (common) {
+      // One origin: o0 = o1, so two corner products per plane.
+      for (int a = 0; a < 3; ++a) {
+        const __m256 bl = _mm256_load_ps(nd.box[a]), bh = _mm256_load_ps(nd.box[3 + a]);
+        const __m256 xn = _mm256_sub_ps(neg[a] ? bh : bl, o0[a]), xf = _mm256_sub_ps(neg[a] ? bl : bh, o0[a]);
+        lo = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(xn, r0[a]), _mm256_mul_ps(xn, r1[a])), lo);
+        hi = _mm256_min_ps(_mm256_mul_ps(_mm256_max_ps(_mm256_mul_ps(xf, r0[a]), _mm256_mul_ps(xf, r1[a])), pad), hi);
+      }
+      n = lo;
+      return _mm256_cmp_ps(lo, hi, _CMP_LE_OQ);
+    }
     for (int a = 0; a < 3; ++a) {
       const __m256 bl = _mm256_load_ps(nd.box[a]), bh = _mm256_load_ps(nd.box[3 + a]);
       const __m256 pn = neg[a] ? bh : bl, pf = neg[a] ? bl : bh;
@@ -310,12 +382,31 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
           g.sync();
         } else if (mbvh_ref::is_leaf(cur)) {
           probe_leaf(m, cur, probe, count);
-          for (uint32_t a = active; a; a &= a - 1) {
-            const uint32_t l = uint32_t(std::countr_zero(a));
-            g.prepare_lane(l);
-            leaf_test<8, 8, K>(m, d.tris.get(), g.tr[l], K == TriKernel::watertight ? nullptr : &g.rc_of(l), cur,
-                               g.hit[l]);
-            g.sync_lane(l);
+          const uint32_t first = mbvh_ref::first_block(cur), nt = mbvh_ref::num_tris(cur);
+          const bool small = nt <= m.small_leaf;
+          // Few triangles, many lanes (a leaf of nt triangles in `blocks` blocks): one triangle
+          // against all lanes at a time; otherwise each lane tests the blocks (block_intersect).
+          bool ray_parallel = false;
+          if constexpr (K == TriKernel::watertight) {
+            g.prepare_lane(uint32_t(std::countr_zero(active)));  // the group's shear (uniform)
+            ray_parallel = g.uniform && 2 * nt < count * (small ? 1 : (nt + 7) / 8);
+          }
+          if (ray_parallel) {
+            for (uint32_t a = active; a; a &= a - 1) g.prepare_lane(uint32_t(std::countr_zero(a)));
+            if (small) {
+              g.parallel_block(m.small[first], nt, active);
+            } else {
+              for (uint32_t k = 0; k * 8 < nt; ++k) g.parallel_block(m.blocks[first + k], std::min(8u, nt - k * 8), active);
+            }
+            for (uint32_t a = active; a; a &= a - 1) g.sync_lane(uint32_t(std::countr_zero(a)));
+          } else {
+            for (uint32_t a = active; a; a &= a - 1) {
+              const uint32_t l = uint32_t(std::countr_zero(a));
+              g.prepare_lane(l);
+              leaf_test<8, 8, K>(m, d.tris.get(), g.tr[l], K == TriKernel::watertight ? nullptr : &g.rc_of(l), cur,
+                                 g.hit[l]);
+              g.sync_lane(l);
+            }
           }
           g.sync();
         } else {
