@@ -71,7 +71,7 @@ struct Group {
   Hit hit[kW];
   float tfar_max = 0;  // the largest lane of G.tfar
   uint32_t ready = 0;  // lanes whose hit and tr are set (a lane's hit record starts with them)
-  uint32_t rc_ready = 0;  // lanes whose rc is built
+  uint32_t rc_ready = 0, tr_ready = 0;  // lanes whose rc, tr are built
   alignas(32) int32_t kx[kW], ky[kW], kz[kW];  // shear8's
   alignas(32) float sx[kW], sy[kW], sz[kW];
   __m256 sx8, sy8, d8[3];  // shear8's sx, sy and the lanes' directions, as vectors
@@ -81,7 +81,7 @@ struct Group {
 
   template <class P>
   void load(const Ray* r, uint32_t count, P& probe) {
-    rays = r, n = count, ready = 0, rc_ready = 0;
+    rays = r, n = count, ready = 0, rc_ready = 0, tr_ready = 0;
     __m256 v[8];
     for (uint32_t l = 0; l < kW; ++l) v[l] = _mm256_loadu_ps(reinterpret_cast<const float*>(&r[std::min(l, n - 1)]));
     packet::transpose8(v);  // org.x org.y org.z tmin dir.x dir.y dir.z tmax
@@ -90,6 +90,7 @@ struct Group {
     common = true;
     for (int a = 0; a < 3; ++a) {
       G.o[a] = v[a];
+      d8[a] = v[4 + a];
       G.inv[a] = _mm256_div_ps(one, v[4 + a]);  // 1/(+-0) = +-inf, as in RayCtx
       const int m = _mm256_movemask_ps(G.inv[a]);
       s = s < 0 || (m != 0 && m != 0xFF) ? -1 : s | (m ? 1 << a : 0);
@@ -114,8 +115,15 @@ struct Group {
     if (ready >> l & 1) return;
     if (!ready) shear8();
     hit[l] = initial_hit(rays[l]);
-    tr[l] = TriRay<8>(rays[l].org, rays[l].dir, kx[l], ky[l], kz[l], sx[l], sy[l], sz[l], rays[l].tmin);
     ready |= 1u << l;
+  }
+  // Lane l's block-test constants (the ray-parallel leaf test reads the group's instead).
+  const TriRay<8>& tr_of(uint32_t l) {
+    if (!(tr_ready >> l & 1)) {
+      tr[l] = TriRay<8>(rays[l].org, rays[l].dir, kx[l], ky[l], kz[l], sx[l], sy[l], sz[l], rays[l].tmin);
+      tr_ready |= 1u << l;
+    }
+    return tr[l];
   }
   const RayCtx& rc_of(uint32_t l) {
     if (!(rc_ready >> l & 1)) rc[l].emplace(rays[l]), rc_ready |= 1u << l;
@@ -126,13 +134,9 @@ struct Group {
   // the same divisions give the same sx, sy, sz, so each lane's TriRay equals TriRay(RayCtx(ray)).
   void shear8() {
     const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-    alignas(32) float dl[3][kW];
-    __m256 d[3], a[3];
-    for (int k = 0; k < 3; ++k) {
-      for (uint32_t l = 0; l < kW; ++l) dl[k][l] = rays[std::min(l, n - 1)].dir[k];
-      d[k] = _mm256_load_ps(dl[k]);
-      a[k] = _mm256_and_ps(d[k], absmask);
-    }
+    const __m256* d = d8;  // load's transposed directions
+    __m256 a[3];
+    for (int k = 0; k < 3; ++k) a[k] = _mm256_and_ps(d[k], absmask);
     const __m256 xy = _mm256_cmp_ps(a[0], a[1], _CMP_GE_OQ), xz = _mm256_cmp_ps(a[0], a[2], _CMP_GE_OQ),
                  yz = _mm256_cmp_ps(a[1], a[2], _CMP_GE_OQ);
     const __m256i z0 = _mm256_castps_si256(_mm256_and_ps(xy, xz)), z1 = _mm256_castps_si256(_mm256_andnot_ps(xy, yz));
@@ -157,7 +161,6 @@ struct Group {
     _mm256_store_si256(reinterpret_cast<__m256i*>(kz), vkz);
     _mm256_store_ps(sx, vsx), _mm256_store_ps(sy, vsy), _mm256_store_ps(sz, vsz);
     sx8 = vsx, sy8 = vsy;
-    for (int k = 0; k < 3; ++k) d8[k] = d[k];
     uniform = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(vkx, _mm256_set1_epi32(kx[0])))) == 0xFF &&
               _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(vky, _mm256_set1_epi32(ky[0])))) == 0xFF &&
               _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(vkz, _mm256_set1_epi32(kz[0])))) == 0xFF;
@@ -383,7 +386,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
             for (uint32_t a = active; a; a &= a - 1) {
               const uint32_t l = uint32_t(std::countr_zero(a));
               g.prepare_lane(l);
-              leaf_test<8, 8, K>(m, d.tris.get(), g.tr[l], K == TriKernel::watertight ? nullptr : &g.rc_of(l), cur,
+              leaf_test<8, 8, K>(m, d.tris.get(), g.tr_of(l), K == TriKernel::watertight ? nullptr : &g.rc_of(l), cur,
                                  g.hit[l]);
               g.sync_lane(l);
             }
@@ -454,7 +457,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
     const RayCtx& rc = g.rc_of(l);
     const NodeRay<8> nr(rc, g.rays[l].tmin);
     MBVHCursor at{ref, 0};
-    mbvh_traverse_from<8, 8, K, O>(*d.mbvh, d.tris.get(), nr, g.tr[l], &rc, at, g.hit[l], stack, probe,
+    mbvh_traverse_from<8, 8, K, O>(*d.mbvh, d.tris.get(), nr, g.tr_of(l), &rc, at, g.hit[l], stack, probe,
                                    NeverLeave{});
     g.sync_lane(l);
   }
