@@ -14,7 +14,7 @@ from collections import defaultdict
 
 SINGLE = ["bvh_single", "mbvh4_single", "mbvh8_single", "kd_single"]
 BATCH = ["mbvh_rs", "raygrid"]
-PACKET = ["bvh_masked", "bvh_ranged", "bvh_partition", "kd_packet"]
+PACKET = ["bvh_masked", "bvh_ranged", "bvh_partition", "mbvh8_packet", "kd_packet"]
 
 
 def best(cells, names, workload):
