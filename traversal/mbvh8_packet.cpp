@@ -28,7 +28,8 @@
 // rays at 0.75-0.91x embree_packet8 (issue 17); this is Embree's structure for them — 8 rays,
 // 8-wide nodes, single-ray fallback — on travbench's own tree and kernels.
 //
-// Parameters: switch (0..8; default 0 on common-origin batches, 8 on others: measured, see
+// Parameters: switch (0..8; default 0 for coherent groups, 2 for the other groups of common-origin
+// batches, 8 without a common origin: measured, see
 // kSwitchCoherent) and the MBVH build parameters of mbvh8_single.
 #include <optional>
 
@@ -44,13 +45,18 @@ using packet::Packet;
 using packet::RayGroup;
 
 constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // mbvh8_single's cached tree
-// `switch` by default: 0 on coherent batches (a common origin) and 8 on the others. Measured, ratio
+// `switch` by default: 0 for coherent groups (those the interval test takes: one origin, common
+// direction signs, in a common-origin batch) and 8 for the others. Measured, ratio
 // to embree_packet8 on dragon_100k primary 512x512 (interleaved, 3 rounds): switch 0 / 1 / 2 =
 // 0.95 / 0.93 / 0.87; on bounce:2, ratio to mbvh8_single: switch 0 / 1 / 2 / 4 / 6 / 8 = 0.45 /
 // 0.58 / 0.66 / 0.71 / 0.81 / 0.87 — incoherent rays share too few nodes for 8-ray groups to pay,
 // so each is traced alone from the root, as Embree's hybrid traversal does when few lanes are
-// active (docs/PERFORMANCE.md, "mbvh8_packet").
-constexpr uint32_t kSwitchCoherent = 0, kSwitchIncoherent = 8;
+// active (docs/PERFORMANCE.md, "mbvh8_packet"). The groups of a common-origin batch that the
+// interval test refuses (mixed direction signs: `rnd`, random directions from one point) take 2:
+// `rnd`, ratio to mbvh8_single (2-3 interleaved rounds), switch 0 / 2 / 8: sibenik 0.55 / 0.80 /
+// 0.95, conference — / 0.93 / 0.97, dragon_100k 0.89 / 1.34 / 0.74, bunny — / 1.35 / 0.72 (the
+// rays that miss an object leave together after a few group tests; those in a closed room do not).
+constexpr uint32_t kSwitchCoherent = 0, kSwitchMixed = 2, kSwitchIncoherent = 8;
 
 // A pending child of the group: its reference and each lane's entry distance (+inf: the lane does
 // not enter it).
@@ -317,7 +323,10 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
     std::vector<GroupEntry> stack(depth);
     std::vector<MBVHStackEntry> single(depth);
     const uint32_t end = batch.packet_begin[range.last];
-    const uint32_t sw = switch_ ? uint32_t(*switch_) : batch.common_origin ? kSwitchCoherent : kSwitchIncoherent;
+    // A group the interval test takes (common origin and direction signs) is coherent; the others
+    // are groups of random directions from one point (`rnd`) or of a batch without a common origin.
+    const uint32_t sw_coherent = switch_ ? uint32_t(*switch_) : kSwitchCoherent;
+    const uint32_t sw_other = switch_ ? uint32_t(*switch_) : batch.common_origin ? kSwitchMixed : kSwitchIncoherent;
     dispatch_kernel(cfg_.kernel, [&](auto k) {
       constexpr TriKernel K = decltype(k)::value;
       auto go = [&](auto order, auto coherent) {
@@ -326,9 +335,9 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
           g.load(&batch.rays[i], std::min<uint32_t>(kW, end - i), probe);
           GroupIA ia;
           if (decltype(coherent)::value && ia.init(g))
-            trace_group<K, decltype(order)::value, true>(d, g, sw, stack.data(), single.data(), &ia, probe);
+            trace_group<K, decltype(order)::value, true>(d, g, sw_coherent, stack.data(), single.data(), &ia, probe);
           else
-            trace_group<K, decltype(order)::value, false>(d, g, sw, stack.data(), single.data(), nullptr, probe);
+            trace_group<K, decltype(order)::value, false>(d, g, sw_other, stack.data(), single.data(), nullptr, probe);
           for (uint32_t l = 0; l < g.n; ++l) {
             hits[i + l] = g.result(l);
             probe.write(&hits[i + l], sizeof(Hit));
@@ -473,7 +482,8 @@ ParamSpecs params_mbvh8_packet() {
          ParamSpecs{auto_default(int_param("switch", 0, 0, 8,
                                            "a group with at most this many active rays at a node finishes that subtree "
                                            "one ray at a time (mbvh8_single's loop); 0: never, 8: always"),
-                                 "0 for common-origin batches, 8 for the others")};
+                                 "0 for groups of a common-origin batch sharing direction signs, 2 for its other "
+                                 "groups, 8 without a common origin")};
 }
 
 }  // namespace tb
