@@ -7,17 +7,20 @@
 // Every 8 consecutive rays of the batch (one per AVX2 lane, packet.h's RayGroup) walk the MBVH8
 // together; a stack entry keeps each lane's entry distance of the child, so a popped child is
 // entered only by the lanes whose closest hit still lies beyond it (Embree's per-lane tNear).
-//   * Interior nodes, coherent batches (a common origin; Embree's coherent hint): the group's
-//     interval bounds (GroupIA below) test all 8 children at once, as one interval ray, and order
-//     them; each child they keep is then tested against the active lanes (one 8-lane slab test,
-//     the kernel library's slab<8>) and pushed only if some lane enters it.
-//   * Interior nodes, other batches: every child against the active lanes, ordered by the nearest
+//   * Interior nodes, coherent groups (one origin and common direction signs, in a common-origin
+//     batch: Embree's coherent hint): the group's interval bounds (GroupIA below) test all 8
+//     children at once, as one interval ray, and order them; each child they keep is then tested
+//     against the active lanes (one 8-lane slab test, the kernel library's slab<8>) and pushed
+//     only if some lane enters it.
+//   * Interior nodes, other groups: every child against the active lanes, ordered by the nearest
 //     lane's entry distance.
 //   * Leaves: each active lane tests the leaf's triangle blocks with mbvh8_single's block test
 //     (block_intersect: one ray against 8 triangles). A leaf is reached by ~3 of the 8 lanes on
-//     primary rays (dragon_100k), so testing each triangle against all 8 lanes instead (the
+//     primary rays (dragon_100k), so testing each triangle against all 8 lanes at every leaf (the
 //     ray-parallel test of the binary packet schemes) did 2-3x the triangle work (callgrind:
-//     docs/PERFORMANCE.md, "mbvh8_packet").
+//     docs/PERFORMANCE.md, "mbvh8_packet"). Only a leaf with few triangles and many active lanes
+//     (2 x triangles < lanes x blocks: a floor or a wall seen by the whole group) is tested one
+//     triangle against all lanes at a time (Group::parallel_block, the same operations per lane).
 //   * When at most `switch` lanes are active at a node, each finishes that subtree alone with
 //     mbvh8_single's loop (mbvh_traverse_from), Benthin et al.'s single-ray switch.
 // A lane's per-ray constants (RayCtx, the block test's TriRay, the loop's NodeRay) are built the
@@ -29,8 +32,8 @@
 // 8-wide nodes, single-ray fallback — on travbench's own tree and kernels.
 //
 // Parameters: switch (0..8; default 0 for coherent groups, 2 for the other groups of common-origin
-// batches, 8 without a common origin: measured, see
-// kSwitchCoherent) and the MBVH build parameters of mbvh8_single.
+// batches, 8 without a common origin: measured, see kSwitchCoherent) and the MBVH build
+// parameters of mbvh8_single.
 #include <optional>
 
 #include "traversal/mbvh_fetch.h"
@@ -46,7 +49,7 @@ using packet::RayGroup;
 
 constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // mbvh8_single's cached tree
 // `switch` by default: 0 for coherent groups (those the interval test takes: one origin, common
-// direction signs, in a common-origin batch) and 8 for the others. Measured, ratio
+// direction signs, in a common-origin batch) and 8 in batches without a common origin. Measured, ratio
 // to embree_packet8 on dragon_100k primary 512x512 (interleaved, 3 rounds): switch 0 / 1 / 2 =
 // 0.95 / 0.93 / 0.87; on bounce:2, ratio to mbvh8_single: switch 0 / 1 / 2 / 4 / 6 / 8 = 0.45 /
 // 0.58 / 0.66 / 0.71 / 0.81 / 0.87 — incoherent rays share too few nodes for 8-ray groups to pay,
@@ -76,7 +79,7 @@ struct Group {
   alignas(32) float tf[kW];  // the lanes of G.tfar, kept in step with hit[l].t
   Hit hit[kW];
   float tfar_max = 0;  // the largest lane of G.tfar
-  uint32_t ready = 0;  // lanes whose hit and tr are set (a lane's hit record starts with them)
+  uint32_t ready = 0;  // lanes whose hit record is set (prepare_lane)
   uint32_t rc_ready = 0, tr_ready = 0;  // lanes whose rc, tr are built
   alignas(32) int32_t kx[kW], ky[kW], kz[kW];  // shear8's
   alignas(32) float sx[kW], sy[kW], sz[kW];
@@ -113,10 +116,11 @@ struct Group {
       if (probe.counts) probe.counts->rays += n;
     }
   }
-  // Lane l's hit record and block-test constants (its RayCtx only where a kernel or the one-ray
-  // loop reads it: rc_of). The shear of all 8 lanes is computed once, in SIMD, when the first lane
-  // needs it (shear8): the scalar RayCtx per lane cost ~200 instructions, most of a primary ray
-  // on the held-out-shaped scene (callgrind).
+  // Lane l's hit record, set when the lane first reaches a leaf (a lane that never does hits
+  // nothing: result). The shear of all 8 lanes is computed then, once, in SIMD (shear8); the
+  // lane's TriRay (tr_of) and RayCtx (rc_of) only when the per-lane block test, a scalar kernel
+  // or the one-ray loop reads them. A scalar RayCtx and TriRay per lane cost ~200 instructions,
+  // most of a primary ray on the held-out-shaped scene (callgrind).
   void prepare_lane(uint32_t l) {
     if (ready >> l & 1) return;
     if (!ready) shear8();
