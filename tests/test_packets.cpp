@@ -2,8 +2,9 @@
 // mbvh8_packet (8-ray groups on the MBVH8, Benthin et al. 2012) against the reference on packets
 // built to stress what packets add over single rays: mixed direction signs inside a packet,
 // partial and odd-sized packets, rays whose interval is already shortened, axis-parallel packets
-// with +-0 components, packets far from the origin, the split variant, and every triangle kernel. Also the packet bounds themselves: the frustum and the interval
-// arithmetic must never cull a box that a ray of the packet enters.
+// with +-0 components, packets far from the origin, the split variant, and every triangle kernel.
+// Also the packet bounds themselves: the frustum and the interval arithmetic must never cull a box
+// that a ray of the packet enters.
 #include <cmath>
 #include <numbers>
 
