@@ -39,6 +39,7 @@
 #include "traversal/mbvh_fetch.h"
 #include "traversal/mbvh_traverse.h"
 #include "traversal/packet.h"
+#include "traversal/packet_box.h"
 
 namespace tb {
 namespace {
@@ -73,7 +74,7 @@ struct Group {
   RayGroup G;          // o, inv, tmin, tfar (the closest hit so far; -inf for lanes past the rays)
   int sign = -1;       // direction sign bits shared by all lanes (x: 1, y: 2, z: 4), else -1
   bool common = false; // all lanes share one origin (org)
-  float org[3] = {};
+  Vec3 org;
   const Ray* rays = nullptr;
   uint32_t n = 0;
   alignas(32) float tf[kW];  // the lanes of G.tfar, kept in step with hit[l].t
@@ -286,31 +287,22 @@ struct GroupIA {
 };
 
 // The lanes `act` of the group against child c of node nd: the entering lanes (all-ones) and their
-// entry distances tn. Planes are selected once for the group when its lanes share direction signs
-// (scalar offsets with a common origin), per lane otherwise: packet_box.h's group_box, keeping tn.
+// entry distances tn, by packet_box.h's group test (planes selected once for the group when its
+// lanes share direction signs, scalar offsets with a common origin, per lane otherwise).
 [[gnu::always_inline]] inline __m256 child_test(const Group& grp, const MBVHNode<8>& nd, uint32_t c, __m256 act,
                                                 __m256& tn) {
-  const RayGroup& G = grp.G;
-  __m256 xn[3], xf[3];
-  for (int a = 0; a < 3; ++a) {
-    const float lo = nd.box[a][c], hi = nd.box[3 + a][c];
-    if (grp.sign >= 0) {
-      const bool neg = (grp.sign >> a) & 1;
-      const float pn = neg ? hi : lo, pf = neg ? lo : hi;
-      if (grp.common) {
-        xn[a] = _mm256_set1_ps(pn - grp.org[a]);
-        xf[a] = _mm256_set1_ps(pf - grp.org[a]);
-      } else {
-        xn[a] = _mm256_sub_ps(_mm256_set1_ps(pn), G.o[a]);
-        xf[a] = _mm256_sub_ps(_mm256_set1_ps(pf), G.o[a]);
-      }
-    } else {
-      const __m256 l = _mm256_sub_ps(_mm256_set1_ps(lo), G.o[a]), h = _mm256_sub_ps(_mm256_set1_ps(hi), G.o[a]);
-      xn[a] = _mm256_blendv_ps(l, h, G.inv[a]);
-      xf[a] = _mm256_blendv_ps(h, l, G.inv[a]);
-    }
+  const float lo[3] = {nd.box[0][c], nd.box[1][c], nd.box[2][c]}, hi[3] = {nd.box[3][c], nd.box[4][c], nd.box[5][c]};
+  __m256 in;
+  if (grp.sign < 0) {
+    const __m256 lo8[3] = {_mm256_set1_ps(lo[0]), _mm256_set1_ps(lo[1]), _mm256_set1_ps(lo[2])};
+    const __m256 hi8[3] = {_mm256_set1_ps(hi[0]), _mm256_set1_ps(hi[1]), _mm256_set1_ps(hi[2])};
+    in = packet::box_hits(grp.G, lo8, hi8, tn);
+  } else if (grp.common) {
+    in = packet::same_sign_hits<true>(grp.G, grp.sign, grp.org, lo, hi, tn);
+  } else {
+    in = packet::same_sign_hits<false>(grp.G, grp.sign, grp.org, lo, hi, tn);
   }
-  return _mm256_and_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn), act);
+  return _mm256_and_ps(in, act);
 }
 
 class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {

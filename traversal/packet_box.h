@@ -23,7 +23,9 @@ namespace tb::packet {
 // lane mask of hits. The node's planes come broadcast (NodeTester::with_test does it once per node
 // rather than once per group: sponza bounce:2, bvh_partition 219.4 M -> 208.4 M instructions, OLD
 // 205.8 M).
-[[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const __m256 lo[3], const __m256 hi[3]) {
+// box_hits returns the hit lanes as a vector mask and their entry distances tn (mbvh8_packet keeps
+// them per lane); box_mask the mask bits.
+[[gnu::always_inline]] inline __m256 box_hits(const RayGroup& g, const __m256 lo[3], const __m256 hi[3], __m256& tn) {
   using S = simd::V<8>;
   __m256 xn[3], xf[3];
   for (int a = 0; a < 3; ++a) {
@@ -31,8 +33,11 @@ namespace tb::packet {
     xn[a] = S::blendv(l, h, g.inv[a]);
     xf[a] = S::blendv(h, l, g.inv[a]);
   }
+  return slab<8, false>(xn, xf, g.inv, g.inv, g.tmin, g.tfar, tn);
+}
+[[gnu::always_inline]] inline uint32_t box_mask(const RayGroup& g, const __m256 lo[3], const __m256 hi[3]) {
   __m256 tn;
-  return uint32_t(S::mask(slab<8, false>(xn, xf, g.inv, g.inv, g.tmin, g.tfar, tn)));
+  return uint32_t(_mm256_movemask_ps(box_hits(g, lo, hi, tn)));
 }
 
 
@@ -43,27 +48,34 @@ namespace tb::packet {
 // Forced inline, as are NodeTester::operator() and ia_misses (packet_bounds.h): after session 8's
 // merges g++ 12 made all three calls (one per 8-ray group or node), e.g. bvh_ranged sponza
 // bounce:2 270.3 M instructions, inlined 250.8 M (OLD 984423f 261.6 M; docs/PERFORMANCE.md, session 9).
+// same_sign_hits is the same test on a group G whose lanes share the direction sign bits s >= 0
+// (gsign) and, kCommon, the origin org: the box's planes lo, hi as scalars. It returns the hit
+// lanes as a vector mask and their entry distances tn (mbvh8_packet's child test keeps them per
+// lane); group_box the mask bits of packet group g, either case.
 template <bool kCommon>
-[[gnu::always_inline]] inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const __m256 lo8[3], const __m256 hi8[3]) {
-  const int s = p.gsign[g];
-  const RayGroup& G = p.rg[g];
-  if (s < 0) return box_mask(G, lo8, hi8);
-  const float* lo = &n.lo.x;
-  const float* hi = &n.hi.x;
+[[gnu::always_inline]] inline __m256 same_sign_hits(const RayGroup& G, int s, const Vec3& org, const float* lo,
+                                                    const float* hi, __m256& tn) {
   __m256 xn[3], xf[3];
   for (int a = 0; a < 3; ++a) {
     const bool neg = (s >> a) & 1;
     const float pn = neg ? hi[a] : lo[a], pf = neg ? lo[a] : hi[a];
     if constexpr (kCommon) {
-      xn[a] = _mm256_set1_ps(pn - p.org[a]);
-      xf[a] = _mm256_set1_ps(pf - p.org[a]);
+      xn[a] = _mm256_set1_ps(pn - org[a]);
+      xf[a] = _mm256_set1_ps(pf - org[a]);
     } else {
       xn[a] = _mm256_sub_ps(_mm256_set1_ps(pn), G.o[a]);
       xf[a] = _mm256_sub_ps(_mm256_set1_ps(pf), G.o[a]);
     }
   }
+  return slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn);
+}
+template <bool kCommon>
+[[gnu::always_inline]] inline uint32_t group_box(const Packet& p, uint32_t g, const BVHNode& n, const __m256 lo8[3], const __m256 hi8[3]) {
+  const int s = p.gsign[g];
+  const RayGroup& G = p.rg[g];
+  if (s < 0) return box_mask(G, lo8, hi8);
   __m256 tn;
-  return uint32_t(_mm256_movemask_ps(slab<8, false>(xn, xf, G.inv, G.inv, G.tmin, G.tfar, tn)));
+  return uint32_t(_mm256_movemask_ps(same_sign_hits<kCommon>(G, s, p.org, &n.lo.x, &n.hi.x, tn)));
 }
 
 // group_box with the node's work hoisted out of the per-group loop: when every group of a
