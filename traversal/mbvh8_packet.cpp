@@ -93,23 +93,13 @@ struct Group {
   void load(const Ray* r, uint32_t count, P& probe) {
     rays = r, n = count, ready = 0, rc_ready = 0, tr_ready = 0;
     __m256 v[8];
-    for (uint32_t l = 0; l < kW; ++l) v[l] = _mm256_loadu_ps(reinterpret_cast<const float*>(&r[std::min(l, n - 1)]));
-    packet::transpose8(v);  // org.x org.y org.z tmin dir.x dir.y dir.z tmax
-    const __m256 one = _mm256_set1_ps(1.f);
-    int s = 0;
+    sign = packet::load_group(G, r, 0, n, v);
+    org = r[0].org;
     common = true;
     for (int a = 0; a < 3; ++a) {
-      G.o[a] = v[a];
       d8[a] = v[4 + a];
-      G.inv[a] = _mm256_div_ps(one, v[4 + a]);  // 1/(+-0) = +-inf, as in RayCtx
-      const int m = _mm256_movemask_ps(G.inv[a]);
-      s = s < 0 || (m != 0 && m != 0xFF) ? -1 : s | (m ? 1 << a : 0);
-      org[a] = r[0].org[a];
       common &= _mm256_movemask_ps(_mm256_cmp_ps(v[a], _mm256_set1_ps(org[a]), _CMP_EQ_OQ)) == 0xFF;
     }
-    sign = s;
-    G.tmin = v[3];
-    G.tfar = _mm256_blendv_ps(_mm256_set1_ps(-INFINITY), v[7], packet::lane_mask_ps(n >= kW ? 0xFFu : (1u << n) - 1));
     _mm256_store_ps(tf, G.tfar);
     tfar_max = Packet::hmax8(G.tfar);
     if constexpr (P::enabled) {

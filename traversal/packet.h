@@ -132,6 +132,29 @@ inline void transpose8(__m256 r[8]) {
   r[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
 }
 
+// Rays [first, first + 8) of rays [0, n) into G, one per lane: origins, reciprocal directions,
+// tmin and tfar (ray.tmax). Lanes past n repeat the last ray with an empty interval (tfar = -inf),
+// so they never hit anything. v receives the transposed rows (org.x org.y org.z tmin dir.x dir.y
+// dir.z tmax); returns the direction sign bits every lane shares (x: 1, y: 2, z: 4), or -1.
+// load_packet's per-group step and mbvh8_packet's whole load.
+[[gnu::always_inline]] inline int load_group(RayGroup& G, const Ray* rays, uint32_t first, uint32_t n, __m256 v[8]) {
+  static_assert(sizeof(Ray) == 8 * sizeof(float));
+  for (uint32_t l = 0; l < kW; ++l) v[l] = _mm256_loadu_ps(reinterpret_cast<const float*>(&rays[std::min(first + l, n - 1)]));
+  transpose8(v);
+  const __m256 one = _mm256_set1_ps(1.f);
+  int gs = 0;
+  for (int a = 0; a < 3; ++a) {
+    G.o[a] = v[a];
+    G.inv[a] = _mm256_div_ps(one, v[4 + a]);  // 1/(+-0) = +-inf, as in RayCtx
+    const int sm = _mm256_movemask_ps(G.inv[a]);
+    gs = gs < 0 || (sm != 0 && sm != 0xFF) ? -1 : gs | (sm ? 1 << a : 0);
+  }
+  const uint32_t real = first + kW <= n ? 0xFFu : (1u << (n - first)) - 1;
+  G.tmin = v[3];
+  G.tfar = _mm256_blendv_ps(_mm256_set1_ps(-INFINITY), v[7], lane_mask_ps(real));
+  return gs;
+}
+
 // Copies rays [0, n) (n <= kMaxRays) into p's groups and computes the per-lane data and the IA
 // bounds, 8 rays at a time. Lanes past n repeat the last ray with an empty interval
 // (tfar = -inf), so they never hit anything and leave every min/max bound unchanged.
@@ -154,18 +177,11 @@ void load_packet(Packet& p, const Ray* rays, uint32_t n, P& probe) {
     for (uint32_t i = 0; i < n; ++i) probe.read(&rays[i], sizeof(Ray));
   for (uint32_t g = 0; g < p.groups; ++g) {
     __m256 v[8];
-    for (uint32_t l = 0; l < kW; ++l)
-      v[l] = _mm256_loadu_ps(reinterpret_cast<const float*>(&rays[std::min(g * kW + l, n - 1)]));
-    transpose8(v);  // v: org.x org.y org.z tmin dir.x dir.y dir.z tmax
-    const __m256 o[3] = {v[0], v[1], v[2]}, d[3] = {v[4], v[5], v[6]};
     RayGroup& G = p.rg[g];
     TriGroup& T = p.tg[g];
-    int gs = 0;
+    p.gsign[g] = int8_t(load_group(G, rays, g * kW, n, v));
+    const __m256 o[3] = {v[0], v[1], v[2]}, d[3] = {v[4], v[5], v[6]};
     for (int a = 0; a < 3; ++a) {
-      G.o[a] = o[a];
-      G.inv[a] = _mm256_div_ps(one, d[a]);  // 1/(+-0) = +-inf, as in RayCtx
-      const int sm = _mm256_movemask_ps(G.inv[a]);
-      gs = gs < 0 || (sm != 0 && sm != 0xFF) ? -1 : gs | (sm ? 1 << a : 0);
       T.d[a] = d[a];
       omin[a] = _mm256_min_ps(omin[a], o[a]);
       omax[a] = _mm256_max_ps(omax[a], o[a]);
@@ -176,10 +192,7 @@ void load_packet(Packet& p, const Ray* rays, uint32_t n, P& probe) {
       nonfinite[a] |= _mm256_movemask_ps(_mm256_cmp_ps(_mm256_and_ps(G.inv[a], absmask), inf, _CMP_EQ_OQ));
       same_org &= _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_castps_si256(o[a]), org0[a])));
     }
-    p.gsign[g] = int8_t(gs);
     const uint32_t real = g * kW + kW <= n ? 0xFFu : (1u << (n - g * kW)) - 1;
-    G.tmin = v[3];
-    G.tfar = _mm256_blendv_ps(_mm256_sub_ps(zero, inf), v[7], lane_mask_ps(real));
     tmin_min = _mm256_min_ps(tmin_min, v[3]);
     p.hg[g].prim = _mm256_set1_epi32(int(kNoHit));
     p.hg[g].u = p.hg[g].v = zero;
