@@ -11,10 +11,19 @@
 // traversal/mbvh_stream.h, shared with raygrid (which runs it on the rays of an octree leaf's
 // queue over that leaf's mini-MBVH, thesis §5.3).
 //
-// Streams are consecutive packets of the batch, grouped up to `stream` rays (parameter, default
-// 256; Tsakok and the thesis found 256-1024 best, §5.2.4); a packet larger than that is cut. A
-// stream's rays are copied into SoA arrays and their per-ray constants computed eight rays per
-// AVX2 instruction (mbvh_stream::prepare).
+// Streams are consecutive packets of the batch, grouped up to `stream` rays (parameter); a packet
+// larger than that is cut. A stream's rays are copied into SoA arrays and their per-ray constants
+// computed eight rays per AVX2 instruction (mbvh_stream::prepare).
+//
+// The default stream is 8192 rays, not the thesis' 256 (Tsakok and the thesis found 256-1024
+// best on their machines, §5.2.4 and §5.3.3; the thesis tables still run 256, harness/tables.cpp):
+// a longer stream shares the upper levels of the tree among more rays (the thesis' Table 8: few
+// rays per node is what limits the scheme), and today's L2 holds it. Measured on bounce:3 at
+// 512x512, 2 interleaved rounds, mbvh_rs / mbvh8_single with stream = 256 / 2048 / 8192 / 65536:
+// conference 1.29 / 1.39 / 1.46 / 1.17, sponza 1.00 / 1.23 / 1.32 / 0.99, sibenik 0.92 / 1.18 /
+// 1.33 / 0.99 (docs/PERFORMANCE.md, "Session 12"). Past the knee the stream's records (96 bytes a
+// ray) leave L2: the simulated cache on sponza puts it between 8192 and 16384 rays for a 512 KB
+// L2 (Zen 3: 7.9 vs 34 L3 hits per ray) and between 16384 and 65536 for this VM's 2 MB.
 //
 // `width`: 4 = the thesis' SSE layout (MBVH<4,4>, greedy collapse, leaves merged up to 4
 // triangles); 8 = AVX2 nodes (MBVH<8,4>, SAH-optimal collapse of Ylitie et al. 2017 as
@@ -34,6 +43,8 @@ namespace {
 // header comment); width=4 gives the thesis' layout (tests/test_mbvh.cpp pins it there to compare
 // with mbvh4_single's tree).
 constexpr int kDefaultWidth = 8;
+// Rays per stream: see the header comment.
+constexpr int kDefaultStream = 8192;
 // 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
 // (mbvh8_single's) with leaves of up to 8 triangles (two blocks). bounce:3, rays/s relative
 // to mbvh8_single, merge 4 / 8 / 16: conference 1.12 / 1.23 / 1.26, sponza 1.16 / 1.25 / 1.11.
@@ -62,7 +73,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kIX, kIY, kIZ, kFX, kFY, kFZ, kSX, kSY, kSZ,
                           kPX, kPY, kPZ, kFields };
   struct Scratch {
-    size_t mp = 0;  // stream capacity rounded up to the SIMD width
+    size_t mp = 0;  // the field arrays' stride (mbvh_stream::field_stride)
     aligned_vector<float> f;
     aligned_vector<uint32_t> meta;
     std::vector<Hit> hits;
@@ -72,14 +83,18 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   template <int N, TriKernel K, class P>
   void run_kernel(const MBVHData<N, 4>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                   P& probe) const {
+    // The scratch is sized for the longest stream this call can form: a call with fewer rays
+    // than `stream` (a small chunk, a scene most rays leave) must not allocate and clear stacks
+    // for the full stream (bunny bounce:3 with stream=65536 ran at a fourteenth of the speed).
+    const uint32_t S = std::max<uint32_t>(
+        1, std::min<uint32_t>(uint32_t(stream_), batch.packet_begin[range.last] - batch.packet_begin[range.first]));
     Scratch s;
-    s.mp = (size_t(stream_) + 7) & ~size_t(7);
+    s.mp = mbvh_stream::field_stride(S);
     s.f.resize(kFields * s.mp);
     s.meta.resize(s.mp);
     s.hits.resize(s.mp);
-    s.st.reserve(N, d.mbvh->stats.max_depth + 1, uint32_t(stream_));
+    s.st.reserve(N, d.mbvh->stats.max_depth + 1, S);
 
-    const uint32_t S = uint32_t(stream_);
     uint32_t begin = batch.packet_begin[range.first], end = begin;
     for (uint32_t p = range.first; p < range.last; ++p) {
       const uint32_t pend = batch.packet_begin[p + 1];
@@ -139,7 +154,8 @@ ParamSpecs params_mbvh_rs() {
   merge = auto_default(merge, "4 with width=4, 8 with width=8");
   collapse = auto_default(collapse, "greedy with width=4, sah with width=8");
   return p + ParamSpecs{int_choice_param("width", kDefaultWidth, {4, 8}, "MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
-                        int_param("stream", 256, 1, 65536, "most rays per stream (consecutive packets of the batch)")};
+                        int_param("stream", kDefaultStream, 1, 65536,
+                                  "most rays per stream (consecutive packets of the batch; the thesis tables run 256)")};
 }
 
 }  // namespace tb

@@ -127,7 +127,7 @@ struct Counters {
 // calls do not fault in fresh pages; one call owns one scratch, so concurrent calls on disjoint
 // ranges never share.
 struct Scratch {
-  uint32_t mp = 0;                    // queue capacity rounded up to the SIMD width
+  uint32_t mp = 0;                    // the field arrays' stride (mbvh_stream::field_stride)
   // Queues: data[q * kFields * mp + f * mp + slot], every field array 32-byte aligned.
   aligned_vector<float> data;
   std::vector<uint32_t> count, leaf, prev, next;
@@ -441,7 +441,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
                  P& probe) const {
     const Octree& oct = *oct_;
     const uint32_t n = last - first, M = uint32_t(m_);
-    s.mp = (M + 7) & ~7u;
+    s.mp = uint32_t(mbvh_stream::field_stride(M));
     const size_t mp = s.mp;
     // At most every ray queued once, plus one partial queue per leaf, plus the queue being
     // processed: (O * M + N) records (§5.3.5). Only the queues actually used are touched.
