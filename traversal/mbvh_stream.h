@@ -353,11 +353,10 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       }
       continue;
     }
-    // Interior node: every ray of the task against the N child boxes (the kernel library's slab
-    // test, as box_test of mbvh_traverse.h, on the stream's SoA ray record).
+    // Interior node: every ray of the task against the N child boxes: mbvh_traverse.h's box_test
+    // (the kernel library's slab test) with the ray's constants from the stream's SoA record.
     const MBVHNode<N>& nd = nodes[t.ref];
     probe.node(&nd, sizeof(nd), t.count);
-    const float* b = &nd.box[0][0];
     uint8_t* masks = s.masks.data();
     unsigned active = 0;
     f dsum = SN::zero();
@@ -365,18 +364,10 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       probe.read(&list[i], sizeof(uint16_t));
       const uint16_t id = list[i];
       probe_ray(v, id, probe);
-      // Rows of box[6][N]: near plane lo (row a) or hi (row 3 + a) by the direction's sign.
-      const uint32_t oct = v.meta[id];
-      const uint32_t nx = (oct & 1) * 3 * N, ny = (oct >> 1 & 1) * 3 * N, nz = (oct >> 2 & 1) * 3 * N;
-      const f ox = SN::set1(v.ox[id]), oy = SN::set1(v.oy[id]), oz = SN::set1(v.oz[id]);
-      const f xn[3] = {SN::sub(SN::load(b + nx), ox), SN::sub(SN::load(b + N + ny), oy),
-                       SN::sub(SN::load(b + 2 * N + nz), oz)};
-      const f xf[3] = {SN::sub(SN::load(b + 3 * N - nx), ox), SN::sub(SN::load(b + 4 * N - ny), oy),
-                       SN::sub(SN::load(b + 5 * N - nz), oz)};
-      const f rn[3] = {SN::set1(v.ix[id]), SN::set1(v.iy[id]), SN::set1(v.iz[id])};
-      const f rf[3] = {SN::set1(v.fx[id]), SN::set1(v.fy[id]), SN::set1(v.fz[id])};
+      const NodeRay<N> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]},
+                          Vec3{v.fx[id], v.fy[id], v.fz[id]}, v.tmin[id], v.meta[id] & 7u);
       f tn;
-      const f enter = slab<N, true>(xn, xf, rn, rf, SN::set1(v.tmin[id]), SN::set1(v.hits[id].t), tn);
+      const f enter = box_test<N>(nd, nr, v.hits[id].t, tn);
       dsum = SN::add(dsum, SN::and_(tn, enter));
       const unsigned mk = unsigned(SN::mask(enter));
       masks[i] = uint8_t(mk);
