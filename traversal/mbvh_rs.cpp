@@ -58,6 +58,9 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
         stream_(cfg.get_int("stream")) {}
   std::string_view name() const override { return "mbvh_rs"; }
   std::string structure_info() const override { return MBVHScheme::structure_info() + " stream=" + std::to_string(stream_); }
+  // A stream is formed from the rays of one call: multi-threaded runs hand out chunks of 16
+  // packets unless asked for more, which would cut every stream to about a thousand rays.
+  uint32_t preferred_chunk_rays() const override { return uint32_t(stream_); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
