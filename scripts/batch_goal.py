@@ -5,8 +5,8 @@ mbvh4_single and embree_single; goal >= 1.3x on the architectural scenes) and ag
 rtcIntersect8 streams (embree_stream; goal >= 1.0x everywhere).
 
 Usage:
-  /usr/bin/python3 scripts/batch_goal.py [--rounds 3] [--scenes S,S,...] [--out /tmp/batch_goal]
-      [--markdown]
+  /usr/bin/python3 scripts/batch_goal.py [--rounds 3] [--scenes S,S,...] [--param KEY=VALUE ...]
+      [--out /tmp/batch_goal] [--markdown]
 
 Each round runs, per scene in turn, one `travbench run --schemes mbvh8_single,mbvh4_single,mbvh_rs,
 raygrid,embree_stream,embree_single --workloads bounce:3` process (512x512, 1 thread), so every
@@ -45,6 +45,8 @@ def main():
     ap.add_argument("--scenes", default=",".join(default_scenes() + ["room"]))
     ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
     ap.add_argument("--out", default="/tmp/batch_goal")
+    ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scheme parameter for every run (repeatable), e.g. task_order=sum")
     ap.add_argument("--markdown", action="store_true", help="print a markdown table")
     args = ap.parse_args()
     args.workloads = "bounce:3"
@@ -58,10 +60,10 @@ def main():
     for r in range(1, args.rounds + 1):
         for s in scenes:
             path = f"{args.out}/{s.replace('/', '_').replace(':', '_')}_{r}.csv"
-            m = run(args.travbench, s, SCHEMES, [], args, path)
+            m = run(args.travbench, s, SCHEMES, args.param, args, path)
             if rays_of(path) < args.small:
-                m = run(args.travbench, s, SCHEMES, [], argparse.Namespace(**{**vars(args), "reps": args.small_reps}),
-                        path)
+                m = run(args.travbench, s, SCHEMES, args.param,
+                        argparse.Namespace(**{**vars(args), "reps": args.small_reps}), path)
             speed = {k: m[("bounce:3", k)] for k in BATCH + SINGLE + ("embree_stream",)}
             batch = max(BATCH, key=speed.get)
             c = cells[s]
@@ -76,7 +78,7 @@ def main():
     head = ["scene", "best batch / best single (>= 1.3 on the architectural scenes)", "best batch / embree_stream (>= 1.0)",
             "best batch (rounds)"]
     print(f"# {args.rounds} rounds, bounce:3, {args.size}x{args.size}, --reps {args.reps} ({args.small_reps} under "
-          f"{args.small} rays); median (min-max) over the rounds")
+          f"{args.small} rays){''.join(' --param ' + p for p in args.param)}; median (min-max) over the rounds")
     if args.markdown:
         print("| " + " | ".join(head) + " |")
         print("|" + "---|" * len(head))

@@ -401,6 +401,27 @@ TEST(MBVH, StreamSizesMatchReference) {
   }
 }
 
+// `task_order` only decides which entered child a stream visits first: the hits are those of the
+// reference under both orders, and the node visits differ (the parameter reaches the kernel).
+TEST(MBVH, StreamChildOrderKeepsHits) {
+  Bench& bench = room_bench();
+  const WorkloadSpec spec = test::small_spec("bounce:2", 96);
+  for (const char* scheme : {"mbvh_rs", "raygrid"}) {
+    TraversalCounts c[2];
+    int k = 0;
+    for (const char* order : {"sum", "mean"}) {
+      SchemeConfig cfg;
+      cfg.params["task_order"] = order;
+      const Accuracy a = test::accuracy_of(bench, scheme, spec, cfg);
+      EXPECT_LE(a.mismatches, 1u) << scheme << " task_order=" << order;
+      EXPECT_EQ(a.false_miss, 0u) << scheme << " task_order=" << order;
+      EXPECT_EQ(a.false_hit, 0u) << scheme << " task_order=" << order;
+      c[k++] = count(scheme, spec, cfg);
+    }
+    EXPECT_NE(c[0].node_ray_visits, c[1].node_ray_visits) << scheme;
+  }
+}
+
 TEST(MBVH, ParametersAreValidated) {
   for (const auto& [k, v] : std::vector<std::pair<std::string, std::string>>{
            {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"},

@@ -4,8 +4,8 @@
 // against the node's child boxes with one SIMD test, and every ray that enters child i is pushed
 // onto lane i's stack — so a child's stream holds only the rays that enter it (no inactive rays,
 // unlike partition traversal). One task per entered child goes onto the task stack, ordered by
-// the summed entry distances of their rays (Alg. 2.10's sorting network), so the nearest is
-// traced first. Leaves intersect every ray of their stream. A stream that has shrunk to one ray
+// the mean entry distance of their rays (`task_order`; the thesis sums them, Alg. 2.10's sorting
+// network), so the nearest is traced first. Leaves intersect every ray of their stream. A stream that has shrunk to one ray
 // continues with ordinary single-ray traversal of that subtree (thesis: "falls back to efficient
 // single ray traversal when the size of a stream drops to one"). The kernel is
 // traversal/mbvh_stream.h, shared with raygrid (which runs it on the rays of an octree leaf's
@@ -55,7 +55,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   // width=4: layout 0 with the thesis' defaults; width=8: layout 1.
   explicit MBVHRayStream(const SchemeConfig& cfg)
       : MBVHScheme(cfg, cfg.get_int("width") == 4 ? kDefaults4 : kDefaults8, cfg.get_int("width") == 4 ? 0 : 1),
-        stream_(cfg.get_int("stream")) {}
+        stream_(cfg.get_int("stream")), order_(mbvh_stream::order_of(cfg)) {}
   std::string_view name() const override { return "mbvh_rs"; }
   std::string structure_info() const override { return MBVHScheme::structure_info() + " stream=" + std::to_string(stream_); }
   // A stream is formed from the rays of one call: multi-threaded runs hand out chunks of 16
@@ -138,7 +138,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
       s.hits[j] = initial_hit(ray);
     }
     mbvh_stream::prepare(v, n);
-    mbvh_stream::trace<N, K>(*d.mbvh, d.tris.get(), s.st, v, n, 0, probe);
+    mbvh_stream::trace<N, K>(*d.mbvh, d.tris.get(), s.st, v, n, 0, order_, probe);
     for (uint32_t j = 0; j < n; ++j) {
       out[first + j] = finish_hit(s.hits[j]);
       probe.write(&out[first + j], sizeof(Hit));
@@ -146,6 +146,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   }
 
   int stream_;
+  mbvh_stream::Order order_;
 };
 
 }  // namespace
@@ -158,7 +159,8 @@ ParamSpecs params_mbvh_rs() {
   collapse = auto_default(collapse, "greedy with width=4, sah with width=8");
   return p + ParamSpecs{int_choice_param("width", kDefaultWidth, {4, 8}, "MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
                         int_param("stream", kDefaultStream, 1, 65536,
-                                  "most rays per stream (consecutive packets of the batch; the thesis tables run 256)")};
+                                  "most rays per stream (consecutive packets of the batch; the thesis tables run 256)"),
+                        mbvh_stream::order_param()};
 }
 
 }  // namespace tb

@@ -7,8 +7,9 @@
 // rays are the `count` ids on top of lane `lane`'s active-ray stack. Every ray of the task is
 // tested against the node's N child boxes (one N-wide slab test per ray), and every ray that
 // enters child c is pushed onto lane c's stack, so a child's stream holds only the rays that enter
-// it. One task per entered child goes onto the task stack, ordered by the summed entry distances
-// of their rays (Alg. 2.10's sorting network, 8-wide for N = 8), the nearest popped first. Leaves
+// it. One task per entered child goes onto the task stack, ordered by the mean (or, as Alg. 2.10,
+// the summed) entry distance of their rays (Alg. 2.10's sorting network, 8-wide for N = 8; `Order`
+// below), the nearest popped first. Leaves
 // intersect every ray of their stream, two rays per AVX2 pass (pair_intersect). A stream that has
 // shrunk to one ray finishes with ordinary single-ray traversal (thesis: "falls back to efficient
 // single ray traversal when the size of a stream drops to one").
@@ -33,6 +34,23 @@
 #include "traversal/mbvh_traverse.h"
 
 namespace tb::mbvh_stream {
+
+// The order in which a node's entered children go onto the task stack (the nearest is popped
+// first). Tsakok and the thesis (§2.2, Alg. 2.10) sort by the SUM of the entry distances of each
+// child's rays; that sum grows with the number of rays, so a child entered by one far ray comes
+// before one entered by fifty near rays. `mean` divides by the count: a child's rays' mean entry
+// distance. bounce:3 at 512x512, best batch / best single (scripts/batch_goal.py, 4 interleaved
+// rounds), sum -> mean: conference 1.40 -> 1.47, sibenik 1.30 -> 1.36, crytek_sponza_partial
+// 1.53 -> 1.57 (raygrid), sibenik_lucy 1.26 -> 1.29, room 1.45 -> 1.47, stadium 1.35 -> 1.38,
+// sponza 1.33 -> 1.28 (docs/PERFORMANCE.md, "Session 12"). The smallest entry distance instead:
+// between the two on the scenes tried.
+enum class Order { sum, mean };
+inline ParamSpec order_param() {
+  return choice_param("task_order", "mean", {"mean", "sum"},
+                      "child order on the task stack: mean or summed (the thesis' Alg. 2.10) entry distance of "
+                      "the child's rays; the thesis tables run sum");
+}
+inline Order order_of(const SchemeConfig& cfg) { return cfg.get_choice("task_order") == "sum" ? Order::sum : Order::mean; }
 
 // The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
 // caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest.
@@ -295,7 +313,7 @@ inline void single(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const
 // stacks (the natural SIMD width of AVX2, as mbvh8_single).
 template <int N, TriKernel K, class P>
 void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v, uint32_t n, uint32_t root,
-           P& probe) {
+           Order order, P& probe) {
   using SN = simd::V<N>;
   using f = typename SN::f;
   const MBVHNode<N>* nodes = m.nodes.data();
@@ -393,16 +411,19 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       probe.write(&tasks[ntasks++], sizeof(Task));
       continue;
     }
-    // Several children: the nearest (smallest summed entry distance) is popped first.
+    // Several children: the nearest (smallest summed or mean entry distance, `task_order`) is popped
+    // first. A child no ray entered has count 0 (its mean 0/0 is replaced by the miss key).
     alignas(32) int32_t keys[N];
     if constexpr (N == 4) {
-      const __m128 act = _mm_castsi128_ps(
-          _mm_cmpgt_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(cnt)), _mm_setzero_si128()));
-      _mm_store_si128(reinterpret_cast<__m128i*>(keys), mbvh_simd::sort4(mbvh_simd::sort_keys4(dsum, act)));
+      const __m128i c4 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(cnt));
+      const __m128 act = _mm_castsi128_ps(_mm_cmpgt_epi32(c4, _mm_setzero_si128()));
+      const __m128 key = order == Order::mean ? _mm_div_ps(dsum, _mm_cvtepi32_ps(c4)) : dsum;
+      _mm_store_si128(reinterpret_cast<__m128i*>(keys), mbvh_simd::sort4(mbvh_simd::sort_keys4(key, act)));
     } else {
-      const __m256 act = _mm256_castsi256_ps(
-          _mm256_cmpgt_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt)), _mm256_setzero_si256()));
-      _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(dsum, act)));
+      const __m256i c8 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cnt));
+      const __m256 act = _mm256_castsi256_ps(_mm256_cmpgt_epi32(c8, _mm256_setzero_si256()));
+      const __m256 key = order == Order::mean ? _mm256_div_ps(dsum, _mm256_cvtepi32_ps(c8)) : dsum;
+      _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(key, act)));
     }
     for (int j = std::popcount(active) - 1; j >= 0; --j) {
       const uint32_t c = uint32_t(keys[j]) & (N - 1);

@@ -158,6 +158,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
     params_.bins = cfg.get_int("bins");
     params_.width = cfg.get_int("width");
     params_.merge = cfg.get_int("merge");
+    order_ = mbvh_stream::order_of(cfg);
   }
   std::string_view name() const override { return "raygrid"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
@@ -572,7 +573,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       mbvh_stream::prepare(v, cnt);
       for (uint32_t k = 0; k < cnt; ++k) v.hits[k] = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
 
-      mbvh_stream::trace<N, K>(mini<N>(), tris_.get(), s.st, v, cnt, lf.mbvh_root, probe);
+      mbvh_stream::trace<N, K>(mini<N>(), tris_.get(), s.st, v, cnt, lf.mbvh_root, order_, probe);
 
       // Finish or move on (Alg. 5.1, second half of `process`): the hits found here go to the
       // output (a ray's best hit only ever improves), the exits of the whole queue are computed
@@ -613,6 +614,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
   OctreeParams params_;
   int m_ = 768;
   uint32_t feed_ = kMaxChunk;  // rays fed per slice (default: all of them before processing, Alg. 5.1)
+  mbvh_stream::Order order_ = mbvh_stream::Order::mean;  // the child order of the stream kernel
   uint32_t depth_ = 1;
   std::shared_ptr<const Octree> oct_;
   std::shared_ptr<const TriangleSet> tris_;
@@ -648,7 +650,8 @@ ParamSpecs params_raygrid() {
           // 8-wide mini-MBVHs by default (§5.3.2 uses the SIMD width of its machine, 4): on bounce:3
           // they made raygrid 5-25% faster than the thesis' 4-wide ones (docs/PERFORMANCE.md).
           int_choice_param("width", 8, {4, 8}, "mini-MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
-          int_param("merge", o.merge, 0, 64, "binary subtrees of at most this many triangles become one mini-MBVH leaf")};
+          int_param("merge", o.merge, 0, 64, "binary subtrees of at most this many triangles become one mini-MBVH leaf"),
+          mbvh_stream::order_param()};
 }
 
 }  // namespace tb
