@@ -5,8 +5,9 @@
 // onto lane i's stack — so a child's stream holds only the rays that enter it (no inactive rays,
 // unlike partition traversal). One task per entered child goes onto the task stack, ordered by
 // the mean entry distance of their rays (`task_order`; the thesis sums them, Alg. 2.10's sorting
-// network), so the nearest is traced first. Leaves intersect every ray of their stream. A stream that has shrunk to one ray
-// continues with ordinary single-ray traversal of that subtree (thesis: "falls back to efficient
+// network), so the nearest is traced first. Leaves intersect every ray of their stream. A stream
+// that has shrunk to one ray continues with ordinary single-ray traversal of that subtree
+// (thesis: "falls back to efficient
 // single ray traversal when the size of a stream drops to one"). The kernel is
 // traversal/mbvh_stream.h, shared with raygrid (which runs it on the rays of an octree leaf's
 // queue over that leaf's mini-MBVH, thesis §5.3).
@@ -16,7 +17,7 @@
 // computed eight rays per AVX2 instruction (mbvh_stream::prepare).
 //
 // The default stream is 8192 rays, not the thesis' 256 (Tsakok and the thesis found 256-1024
-// best on their machines, §5.2.4 and §5.3.3; the thesis tables still run 256, harness/tables.cpp):
+// best on their machines, §5.2.4; the thesis tables still run 256, harness/tables.cpp):
 // a longer stream shares the upper levels of the tree among more rays (the thesis' Table 8: few
 // rays per node is what limits the scheme), and today's L2 holds it. Measured on bounce:3 at
 // 512x512, 2 interleaved rounds, mbvh_rs / mbvh8_single with stream = 256 / 2048 / 8192 / 65536:
