@@ -7,10 +7,9 @@
 // the mean entry distance of their rays (`task_order`; the thesis sums them, Alg. 2.10's sorting
 // network), so the nearest is traced first. Leaves intersect every ray of their stream. A stream
 // that has shrunk to one ray continues with ordinary single-ray traversal of that subtree
-// (thesis: "falls back to efficient
-// single ray traversal when the size of a stream drops to one"). The kernel is
-// traversal/mbvh_stream.h, shared with raygrid (which runs it on the rays of an octree leaf's
-// queue over that leaf's mini-MBVH, thesis §5.3).
+// (thesis: "falls back to efficient single ray traversal when the size of a stream drops to
+// one"). The kernel is traversal/mbvh_stream.h, shared with raygrid (which runs it on the rays of
+// an octree leaf's queue over that leaf's mini-MBVH, thesis §5.3).
 //
 // Streams are consecutive packets of the batch, grouped up to `stream` rays (parameter); a packet
 // larger than that is cut. A stream's rays are copied into SoA arrays and their per-ray constants
