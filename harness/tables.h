@@ -39,9 +39,8 @@ WorkloadSpec table_spec(const TableOptions& opt, const std::string& workload, ui
 // The thesis' layout for the stream schemes of Tables 7-10: mbvh_rs and raygrid default to 8-wide
 // nodes (faster here, docs/PERFORMANCE.md) but the thesis measured 4-wide SSE nodes (and RayGrid
 // queues of M = 384, §5.3.5, MBVH/RS streams of 256 rays, Table 8, children sorted by summed
-// distance, Alg. 2.10); unless --param width is
-// given, these tables pin that layout so their rows compare with the thesis' and with
-// mbvh4_single. Returns the label for a "layout" column.
+// distance, Alg. 2.10); unless --param width is given, these tables pin that layout so their rows
+// compare with the thesis' and with mbvh4_single. Returns the label for a "layout" column.
 std::string thesis_layout(const std::string& scheme, SchemeConfig& cfg);
 // A scheme variant of the accuracy table: a kernel for our schemes, robust or fast mode for Embree.
 struct Variant {

@@ -103,10 +103,13 @@ struct NodeRay {
   f nox, noy, noz, ix, iy, iz, fx, fy, fz, tmin;  // nox = -org.x
   const uint32_t* rows;  // kPlaneRows<N> of the ray's octant
   uint32_t octant;       // bit a set: direction a negative
-  NodeRay(const RayCtx& rc, float t0) { init(rc.org, rc.inv, t0); }
-  NodeRay(Vec3 org, Vec3 inv, float t0) { init(org, inv, t0); }
-  // From constants computed ahead for many rays (mbvh_stream::prepare: far = inv * kFarPad, the
-  // same operation as init's; octant as init's bits).
+  NodeRay(const RayCtx& rc, float t0) : NodeRay(rc.org, rc.inv, t0) {}
+  NodeRay(Vec3 org, Vec3 inv, float t0)
+      : NodeRay(org, inv, Vec3{inv.x * kFarPad, inv.y * kFarPad, inv.z * kFarPad}, t0,
+                uint32_t(std::signbit(inv.x)) | uint32_t(std::signbit(inv.y)) << 1 |
+                    uint32_t(std::signbit(inv.z)) << 2) {}
+  // From constants computed ahead: far = inv * kFarPad and the octant's bits, as the constructor
+  // above computes them (mbvh_stream::prepare does so for a whole stream).
   NodeRay(Vec3 org, Vec3 inv, Vec3 far, float t0, uint32_t oct) {
     using S = simd::V<N>;
     nox = S::set1(-org.x), noy = S::set1(-org.y), noz = S::set1(-org.z);
@@ -114,15 +117,6 @@ struct NodeRay {
     fx = S::set1(far.x), fy = S::set1(far.y), fz = S::set1(far.z);
     tmin = S::set1(t0);
     octant = oct;
-    rows = kPlaneRows<N>[octant].data();
-  }
-  void init(Vec3 org, Vec3 inv, float t0) {
-    using S = simd::V<N>;
-    nox = S::set1(-org.x), noy = S::set1(-org.y), noz = S::set1(-org.z);
-    ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
-    fx = S::set1(inv.x * kFarPad), fy = S::set1(inv.y * kFarPad), fz = S::set1(inv.z * kFarPad);
-    tmin = S::set1(t0);
-    octant = uint32_t(std::signbit(inv.x)) | uint32_t(std::signbit(inv.y)) << 1 | uint32_t(std::signbit(inv.z)) << 2;
     rows = kPlaneRows<N>[octant].data();
   }
 };
