@@ -273,6 +273,14 @@ void count_arrays(MBVH<N, W>& m) {
   s.avg_leaf_tris = s.leaves ? double(s.triangles) / s.leaves : 0.0;
   const double lanes = double(m.blocks.size()) * W + double(m.small.size()) * 4;
   s.lane_fill = lanes > 0 ? double(s.triangles) / lanes : 0.0;
+  for (int a = 0; a < 3; ++a) {
+    float k = 0.f;
+    for (const MBVHNode<N>& n : m.nodes)
+      for (int i = 0; i < N; ++i)
+        for (const float x : {n.box[a][i], n.box[3 + a][i]})
+          if (std::isfinite(x)) k = std::max(k, std::fabs(x));
+    m.coord_bound[a] = k;
+  }
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 // node test, the triangle-block test and the ordered single-ray traversal shared by mbvh4_single,
 // mbvh8_single, mbvh_rs and raygrid — is traversal/mbvh_traverse.h.
 #pragma once
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -99,6 +100,11 @@ struct MBVH {
   aligned_vector<TriBlock<4>> small;
   uint32_t small_leaf = 0;  // leaves of at most this many triangles are small (0 or 4; 0 when W = 4)
   MBVHStats stats;
+  // Per axis the largest |coordinate| of any finite child-box plane (set with the stats): the
+  // traversal's fused node test bounds its rounding error by it (traversal/kernels.h,
+  // FusedPlanes). +inf until set, which only makes that bound useless (every axis left out: no
+  // box culled), never wrong.
+  float coord_bound[3] = {INFINITY, INFINITY, INFINITY};
 
   // Collapses the binary BVH (whose subtrees hold contiguous ranges of prim_index). Greedy
   // (Dammertz et al. 2008, the thesis' construction): start from the binary node's two children

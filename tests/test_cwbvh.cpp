@@ -14,6 +14,7 @@
 #include "structures/builtin_scenes.h"
 #include "structures/cwbvh.h"
 #include "traversal/cwbvh_traverse.h"
+#include "test_geometry.h"
 #include "test_util.h"
 #include "workloads/hard_cases.h"
 
@@ -134,21 +135,6 @@ TestNode random_node(std::mt19937& rng, Vec3 center, float scale) {
   return t;
 }
 
-// Exact entry/exit of the ray the traversal sees (DAZ: |d| < 2^-126 is 0, parallel to the slab).
-bool exact_interval(const AABB& b, Vec3 o, Vec3 d, float tmin, float tfar, long double& t0, long double& t1) {
-  t0 = tmin, t1 = tfar;
-  for (int a = 0; a < 3; ++a) {
-    if (std::fabs(d[a]) < FLT_MIN) {
-      if (o[a] < b.lo[a] || o[a] > b.hi[a]) return false;
-      continue;
-    }
-    long double n = ((long double)b.lo[a] - o[a]) / d[a], f = ((long double)b.hi[a] - o[a]) / d[a];
-    if (n > f) std::swap(n, f);
-    t0 = std::max(t0, n), t1 = std::min(t1, f);
-  }
-  return t0 <= t1;
-}
-
 // The unpadded fused test of one slot (for the control count only).
 bool unpadded_enters(const TestNode& t, int i, Vec3 o, Vec3 d, float tmin, float tfar) {
   float n = tmin, f = tfar;
@@ -175,43 +161,9 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
         const TestNode t = random_node(rng, Vec3{offset, -0.5f * offset, 0.25f * offset}, scale);
         for (int j = 0; j < 40; ++j) {
           const AABB& c = t.box[rng() % uint32_t(t.used)];
-          auto inside = [&](const AABB& b) {
-            return Vec3{b.lo.x + (b.hi.x - b.lo.x) * U01(rng), b.lo.y + (b.hi.y - b.lo.y) * U01(rng),
-                        b.lo.z + (b.hi.z - b.lo.z) * U01(rng)};
-          };
-          auto on_boundary = [&](const AABB& b) {  // a face, edge or corner
-            Vec3 q = inside(b);
-            for (int a = 0; a < 3; ++a)
-              if (rng() % 2) q[a] = rng() % 2 ? b.lo[a] : b.hi[a];
-            return q;
-          };
-          Vec3 o;
-          switch (rng() % 4) {
-            case 0: o = c.lo + Vec3{U(rng), U(rng), U(rng)} * (3 * scale); break;
-            case 1: o = on_boundary(c) + Vec3{U(rng), U(rng), U(rng)} * scale; break;
-            case 2: o = inside(c); break;
-            default: o = c.lo + Vec3{U(rng), U(rng), U(rng)} * (1e3f * scale); break;
-          }
-          if (rng() % 3 == 0) {  // the origin on one of the child's planes
-            const int a = int(rng() % 3);
-            o[a] = rng() % 2 ? c.lo[a] : c.hi[a];
-          }
-          Vec3 d;
-          switch (rng() % 3) {
-            case 0: d = inside(c) - o; break;
-            case 1: d = on_boundary(c) - o; break;
-            default: d = {U(rng), U(rng), U(rng)}; break;
-          }
-          for (int a = 0; a < 3; ++a) {
-            const uint32_t m = rng() % 16;
-            if (m == 0) d[a] = 0.f;
-            else if (m == 1) d[a] = -0.f;
-            else if (m == 2) d[a] = 1e-40f;  // denormal: 0 under DAZ
-            else if (m == 3) d[a] = std::copysign(1e-30f, U(rng));
-          }
-          if (d.x == 0 && d.y == 0 && d.z == 0) d.z = 1;
-          const float tmin = rng() % 4 == 0 ? 1e-3f * U01(rng) : 0.f;
-          const float tfar = rng() % 3 == 0 ? 2.f * U01(rng) : INFINITY;
+          const test::HammerRay hr = test::hammer_ray(rng, c, scale);
+          const Vec3 o = hr.org, d = hr.dir;
+          const float tmin = hr.tmin, tfar = hr.tfar;
           Ray ray;
           ray.org = o, ray.dir = d, ray.tmin = tmin, ray.tmax = tfar;
           const RayCtx rc(ray);
@@ -223,7 +175,7 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
           for (int i = 0; i < t.used; ++i) {
             long double t0, t1;
             ++checked;
-            if (!exact_interval(t.box[i], o, d, tmin, tfar, t0, t1)) continue;
+            if (!test::exact_slab_interval(t.box[i], o, d, tmin, tfar, t0, t1)) continue;
             ++entered_exact;
             ASSERT_TRUE(mask >> i & 1) << "a child the ray enters was culled: offset " << offset << " scale " << scale
                                        << " slot " << i << " exact [" << double(t0) << ", " << double(t1) << "]";

@@ -40,6 +40,75 @@ inline Scene random_triangles(uint32_t n, uint32_t seed, const RandomTriangles& 
   return s;
 }
 
+// A ray that tests a conservative node test near box c (of size ~scale): the origin near the box,
+// on one of its planes, inside it or far away; the direction at its inside, a face, edge or corner
+// (grazing) or random, with components +-0, denormal (0 under DAZ) and 1e-30; tmin 0 or small,
+// tfar infinite or short. CWBVH.FusedNodeTestIsConservative and MBVH.FusedNodeTestIsConservative.
+struct HammerRay {
+  Vec3 org, dir;
+  float tmin, tfar;
+};
+inline HammerRay hammer_ray(std::mt19937& rng, const AABB& c, float scale) {
+  std::uniform_real_distribution<float> U(-1.f, 1.f), U01(0.f, 1.f);
+  auto inside = [&](const AABB& b) {
+    return Vec3{b.lo.x + (b.hi.x - b.lo.x) * U01(rng), b.lo.y + (b.hi.y - b.lo.y) * U01(rng),
+                b.lo.z + (b.hi.z - b.lo.z) * U01(rng)};
+  };
+  auto on_boundary = [&](const AABB& b) {  // a face, edge or corner
+    Vec3 q = inside(b);
+    for (int a = 0; a < 3; ++a)
+      if (rng() % 2) q[a] = rng() % 2 ? b.lo[a] : b.hi[a];
+    return q;
+  };
+  Vec3 o;
+  switch (rng() % 4) {
+    case 0: o = c.lo + Vec3{U(rng), U(rng), U(rng)} * (3 * scale); break;
+    case 1: o = on_boundary(c) + Vec3{U(rng), U(rng), U(rng)} * scale; break;
+    case 2: o = inside(c); break;
+    default: o = c.lo + Vec3{U(rng), U(rng), U(rng)} * (1e3f * scale); break;
+  }
+  if (rng() % 3 == 0) {  // the origin on one of the box's planes
+    const int a = int(rng() % 3);
+    o[a] = rng() % 2 ? c.lo[a] : c.hi[a];
+  }
+  Vec3 d;
+  switch (rng() % 3) {
+    case 0: d = inside(c) - o; break;
+    case 1: d = on_boundary(c) - o; break;
+    default: d = {U(rng), U(rng), U(rng)}; break;
+  }
+  for (int a = 0; a < 3; ++a) {
+    const uint32_t m = rng() % 16;
+    if (m == 0) d[a] = 0.f;
+    else if (m == 1) d[a] = -0.f;
+    else if (m == 2) d[a] = 1e-40f;  // denormal: 0 under DAZ
+    else if (m == 3) d[a] = std::copysign(1e-30f, U(rng));
+  }
+  if (d.x == 0 && d.y == 0 && d.z == 0) d.z = 1;
+  const float tmin = rng() % 4 == 0 ? 1e-3f * U01(rng) : 0.f;
+  const float tfar = rng() % 3 == 0 ? 2.f * U01(rng) : INFINITY;
+  return {o, d, tmin, tfar};
+}
+
+// The exact parameter interval [t0, t1] of the ray o + t d, tmin <= t <= tfar, inside box b, in
+// long double (a float's product and quotient are within its 64-bit mantissa's reach): what a
+// conservative node test must never cull. Under DAZ (every tracing thread) |d| < 2^-126 reads as 0:
+// the ray is parallel to that slab and inside it exactly when lo <= o <= hi.
+inline bool exact_slab_interval(const AABB& b, Vec3 o, Vec3 d, float tmin, float tfar, long double& t0,
+                                long double& t1) {
+  t0 = tmin, t1 = tfar;
+  for (int a = 0; a < 3; ++a) {
+    if (std::fabs(d[a]) < 0x1p-126f) {
+      if (o[a] < b.lo[a] || o[a] > b.hi[a]) return false;
+      continue;
+    }
+    long double n = ((long double)b.lo[a] - o[a]) / d[a], f = ((long double)b.hi[a] - o[a]) / d[a];
+    if (n > f) std::swap(n, f);
+    t0 = std::max(t0, n), t1 = std::min(t1, f);
+  }
+  return t0 <= t1;
+}
+
 // Independent closed triangle / closed box overlap: the separating axis theorem (Akenine-Moller
 // 2001) in double — the box's three axes, the triangle normal, and the nine edge x axis
 // crosses. Touching counts as overlap (strict separation only).

@@ -202,6 +202,77 @@ TEST(MBVH, TinyScenes) {
   }
 }
 
+// The fused node test (box_test: kernels.h's FusedPlanes, one fma per plane with the per-ray
+// absolute bound) against long-double distances: every child whose exact interval
+// [max(tmin, near), min(tfar, far)] is non-empty must be entered, with an entry distance at or
+// below the exact one. Nodes at offsets 0 to 1e6 with flat children (zero extent on one axis or
+// all) and tiny ones; origins on a child's plane, inside one, near and far; directions at a
+// child's inside, faces, edges and corners (grazing) and random ones, with components +-0,
+// denormal (0 under DAZ) and 1e-30. The same rays with the error bound left out (E = 0: Embree's
+// fast-mode formula) must cull some entered child, or the hammer would not test the bound.
+TEST(MBVH, FusedNodeTestIsConservative) {
+  enable_ftz_daz();
+  std::mt19937 rng(23);
+  std::uniform_real_distribution<float> U(-1.f, 1.f), U01(0.f, 1.f);
+  uint64_t checked = 0, entered_exact = 0, unbounded_misses = 0;
+  for (float offset : {0.f, 1.f, 1e5f, -1e5f, 3e5f, 1e6f, -1e6f}) {
+    for (float scale : {1e-3f, 1.f, 100.f}) {
+      for (int k = 0; k < 400; ++k) {
+        MBVHNode<8> nd;
+        AABB box[8];
+        const int used = 2 + int(rng() % 7);
+        float bound[3] = {0, 0, 0};
+        const Vec3 center{offset, -0.5f * offset, 0.25f * offset};
+        for (int i = 0; i < 8; ++i) {
+          Vec3 c = center + Vec3{U(rng), U(rng), U(rng)} * scale, h;
+          for (int a = 0; a < 3; ++a) {
+            const int m = int(rng() % 5);
+            h[a] = m == 0 ? 0.f : m == 1 ? 1e-4f * scale * U01(rng) : m == 2 ? 1e-7f * scale : scale * U01(rng);
+          }
+          if (rng() % 8 == 0) h = {0, 0, 0};  // a point
+          box[i] = {c - h, c + h};
+          for (int a = 0; a < 3; ++a) {
+            nd.box[a][i] = i < used ? box[i].lo[a] : INFINITY;
+            nd.box[3 + a][i] = i < used ? box[i].hi[a] : -INFINITY;
+            if (i < used) bound[a] = std::max({bound[a], std::fabs(box[i].lo[a]), std::fabs(box[i].hi[a])});
+          }
+          nd.ref[i] = 0;
+        }
+        nd.num_children = uint32_t(used);
+        for (int j = 0; j < 40; ++j) {
+          const AABB& c = box[rng() % uint32_t(used)];
+          const test::HammerRay hr = test::hammer_ray(rng, c, scale);
+          const Vec3 o = hr.org, d = hr.dir;
+          const float tmin = hr.tmin, tfar = hr.tfar;
+          const RayCtx rc(Ray{o, tmin, d, tfar});
+          const NodeRay<8> nr(rc, tmin, bound);
+          const NodeRay<8> unbounded(fused_planes(rc.org, rc.inv, bound, 0.f, 0.f), tmin, nr.octant);
+          __m256 tn, tn_unbounded;
+          const int mask = _mm256_movemask_ps(box_test<8>(nd, nr, tfar, tn));
+          const int mask_unbounded = _mm256_movemask_ps(box_test<8>(nd, unbounded, tfar, tn_unbounded));
+          ASSERT_EQ(mask >> used, 0) << "an unused slot was entered";
+          alignas(32) float tns[8];
+          _mm256_store_ps(tns, tn);
+          for (int i = 0; i < used; ++i) {
+            long double t0, t1;
+            ++checked;
+            if (!test::exact_slab_interval(box[i], o, d, tmin, tfar, t0, t1)) continue;
+            ++entered_exact;
+            ASSERT_TRUE(mask >> i & 1) << "a child the ray enters was culled: offset " << offset << " scale " << scale
+                                       << " slot " << i << " exact [" << double(t0) << ", " << double(t1) << "]";
+            ASSERT_LE((long double)tns[i], t0) << "entry distance above the exact one";
+            if (!(mask_unbounded >> i & 1)) ++unbounded_misses;
+          }
+        }
+      }
+    }
+  }
+  std::printf("fused node test: %llu child tests, %llu entered exactly, the unbounded formula culled %llu of them\n",
+              (unsigned long long)checked, (unsigned long long)entered_exact, (unsigned long long)unbounded_misses);
+  EXPECT_GT(entered_exact, checked / 20) << "the rays should enter a fair share of the children";
+  EXPECT_GT(unbounded_misses, 0u) << "no ray tested the bound: the unbounded formula never culled an entered child";
+}
+
 // The branch-free networks must return a permutation in ascending order, also when distances
 // of 0 make the keys denormals (DAZ, set by every tracing thread, makes those compare equal as
 // floats: the reason the networks compare integers).

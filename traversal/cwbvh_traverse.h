@@ -88,21 +88,10 @@ struct CWRay {
   const uint64_t* order;  // kCWOctantOrder of the ray's octant
 
   CWRay(const RayCtx& ray, float t0, const float coord_bound[3]) {
-    const __m128 r = _mm_setr_ps(ray.inv.x, ray.inv.y, ray.inv.z, 0.f);
-    const __m128 o = _mm_setr_ps(ray.org.x, ray.org.y, ray.org.z, 0.f);
-    const __m128 k = _mm_setr_ps(coord_bound[0], coord_bound[1], coord_bound[2], 0.f);
-    const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
-    const __m128 R = _mm_and_ps(r, abs_mask);
-    const __m128 Z = _mm_mul_ps(_mm_add_ps(k, _mm_and_ps(o, abs_mask)), R);
-    const __m128 E = _mm_fmadd_ps(Z, _mm_set1_ps(8 * 0x1p-24f),
-                                  _mm_mul_ps(_mm_add_ps(R, _mm_set1_ps(1.f)), _mm_set1_ps(0x1p-110f)));
-    // Used: 0 < R and E <= 2^100 (false for R = inf or NaN, and for the overflow case); lane 3 off.
-    const __m128 use = _mm_and_ps(_mm_and_ps(_mm_cmpgt_ps(R, _mm_setzero_ps()), _mm_cmple_ps(E, _mm_set1_ps(0x1p100f))),
-                                  _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)));
-    const __m128 rr = _mm_blendv_ps(_mm_set1_ps(NAN), r, use);
-    const __m128 no = _mm_sub_ps(_mm_setzero_ps(), o);
-    const __m128 cn = _mm_and_ps(_mm_fmadd_ps(no, r, _mm_sub_ps(_mm_setzero_ps(), E)), use);
-    const __m128 cf = _mm_and_ps(_mm_fmadd_ps(no, r, E), use);
+    // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
+    // E = 8 u (K + |o|) R + 2^-110 (1 + R).
+    const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
+    const __m128 rr = p.r, cn = p.cn, cf = p.cf;
     alignas(16) float rs[4], ns[4], fs[4];
     _mm_store_ps(rs, rr), _mm_store_ps(ns, cn), _mm_store_ps(fs, cf);
     for (int a = 0; a < 3; ++a) r8[a] = _mm256_set1_ps(rs[a]), cn8[a] = _mm256_set1_ps(ns[a]), cf8[a] = _mm256_set1_ps(fs[a]);
@@ -110,7 +99,7 @@ struct CWRay {
     tmin = _mm256_set1_ps(t0);
     bias = _mm_set1_epi32(127);
     __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
-    const int octant = _mm_movemask_ps(r) & 7;
+    const int octant = _mm_movemask_ps(_mm_setr_ps(ray.inv.x, ray.inv.y, ray.inv.z, 0.f)) & 7;
     rows = kCWPlaneRows[octant].data();
     order = kCWOctantOrder[octant].data();
   }

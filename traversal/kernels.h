@@ -116,6 +116,60 @@ template <int L, bool kPadRcp>
   return S::le(n, f);
 }
 
+// Per-ray constants of a fused slab test: the distance to an axis-a plane P is one fused
+// multiply-add, t = fl(P * r + c), instead of Ize's subtract and multiply (Embree's fast mode and
+// Ylitie, Karras and Laine 2017 §3.1 compute it so; their form has no bound). Here c carries a
+// per-ray absolute error bound E: c_near = fl(-o r - E), c_far = fl(-o r + E), so every near
+// distance is a LOWER and every far distance an UPPER bound of the exact T = (P - o) / d, and the
+// test never culls a box the ray enters. The bound, per axis (PBR 3rd ed. §3.9 notation,
+// u = 2^-24; o the origin, r = fl(1/d), R = |r|, K >= |P| for every plane the test will see):
+//   1/|d| <= R / (1 - u), so |T| <= (K + |o|) R / (1 - u), and (P - o) r = T (1 + rho), |rho| <= u;
+//   c = (-o r -+ E)(1 + d1) (one fma), t = (P r + c)(1 + d2), |d1|, |d2| <= u;
+//   |t - (T -+ E)| <= u |T| + u (|o| R + E) + u |P r + c|, and |P r + c| <= |T| (1 + u) + E + u (|o| R + E),
+//   so |t - (T -+ E)| <= u (2 K + 3 |o|) R (1 + 3u) + 2.01 u E,
+// plus flush-to-zero (< 2^-126 per rounding) and denormal inputs read as 0 under DAZ (< 2^-126 R
+// per operand): < 2^-110 (1 + R). E = 1.01 u (2 K + 3 |o|) R + 2^-110 (1 + R), evaluated in float
+// (four roundings down at most: still >= 1.005 u (2 K + 3 |o|) R, and the 0.005 covers the
+// second-order terms), bounds it. A caller with roundings of its own (the compressed BVH's decode)
+// passes larger factors kK, ko for K and |o|. An axis is left out (r = NaN, c = 0: every t of that
+// axis is NaN, which the NaN-skipping max/min of the node tests ignore — conservative) where R = 0
+// (|d| > 2^126), R = inf (d = 0 or denormal), R or o is NaN, or E > 2^100 (so |P r|, |c| <= 2^123
+// stay finite). What it costs: along an axis the box grows by E / R ~ u (2 K + 3 |o|), a few float
+// ulps of the scene's coordinates, where Ize's pad grows the far distance by 6 u t; an
+// axis-parallel ray (d = 0 exactly) does not use that axis to cull; and a box with a face in the
+// plane of the closest hit (coplanar walls, spatial-split pieces of one floor) is entered, where
+// Ize's unpadded near distance ties with the hit and usually culls it: 2.6% more leaves on
+// stadium bounce:2 (docs/PERFORMANCE.md, session 13, also for a form with a relative pad instead
+// of K: fewer extra leaves, three more per-ray vectors, slower).
+//
+// One axis of L rays (or the three axes of one ray in lanes 0..2 of L = 4: then lane 3 must
+// have inv = 0, which leaves it out): r, c_near and c_far from the origin o, the reciprocal
+// direction inv and the coordinate bound K.
+template <int L>
+struct FusedPlanes {
+  typename simd::V<L>::f r, cn, cf;
+};
+template <int L>
+[[gnu::always_inline]] inline FusedPlanes<L> fused_planes(typename simd::V<L>::f o, typename simd::V<L>::f inv,
+                                                         typename simd::V<L>::f K, float kK = 2.02f * kUlp,
+                                                         float ko = 3.03f * kUlp) {
+  using S = simd::V<L>;
+  const typename S::f R = S::abs(inv);
+  const typename S::f Z = S::mul(S::fma(K, S::set1(kK), S::mul(S::abs(o), S::set1(ko))), R);
+  const typename S::f E = S::fma(S::add(R, S::set1(1.f)), S::set1(0x1p-110f), Z);
+  // Used: 0 < R and E <= 2^100 (false for R = inf or NaN, o NaN, and the overflow case).
+  const typename S::m use = S::and_(S::gt(R, S::zero()), S::le(E, S::set1(0x1p100f)));
+  const typename S::f no = S::sub(S::zero(), o);
+  return {S::blendv(S::set1(NAN), inv, use), S::select(use, S::fma(no, inv, S::sub(S::zero(), E))),
+          S::select(use, S::fma(no, inv, E))};
+}
+// The three axes of one ray, in lanes 0..2.
+inline FusedPlanes<4> fused_planes(Vec3 org, Vec3 inv, const float bound[3], float kK = 2.02f * kUlp,
+                                   float ko = 3.03f * kUlp) {
+  return fused_planes<4>(_mm_setr_ps(org.x, org.y, org.z, 0.f), _mm_setr_ps(inv.x, inv.y, inv.z, 0.f),
+                         _mm_setr_ps(bound[0], bound[1], bound[2], 0.f), kK, ko);
+}
+
 // The slab test for one ray: the entry distance or +inf on a miss. tfar is the current closest
 // hit (or ray tmax).
 inline float box_entry(const RayCtx& r, const Vec3& lo, const Vec3& hi, float tmin, float tfar) {

@@ -450,7 +450,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
                           P& probe) {
     g.prepare_lane(l);
     const RayCtx& rc = g.rc_of(l);
-    const NodeRay<8> nr(rc, g.rays[l].tmin);
+    const NodeRay<8> nr(rc, g.rays[l].tmin, d.mbvh->coord_bound);
     MBVHCursor at{ref, 0};
     mbvh_traverse_from<8, 8, K, O>(*d.mbvh, d.tris.get(), nr, g.tr_of(l), &rc, at, g.hit[l], stack, probe,
                                    NeverLeave{});

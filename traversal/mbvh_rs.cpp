@@ -73,8 +73,8 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 
  private:
   // The stream's SoA record: the ray fields, the derived constants, the hits.
-  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kIX, kIY, kIZ, kFX, kFY, kFZ, kSX, kSY, kSZ,
-                          kPX, kPY, kPZ, kFields };
+  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kIX, kIY, kIZ, kRX, kRY, kRZ, kNX, kNY, kNZ, kFX,
+                          kFY, kFZ, kSX, kSY, kSZ, kPX, kPY, kPZ, kFields };
   struct Scratch {
     size_t mp = 0;  // the field arrays' stride (mbvh_stream::field_stride)
     aligned_vector<float> f;
@@ -124,7 +124,8 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     float* f = s.f.data();
     const size_t mp = s.mp;
     const mbvh_stream::Rays v{f + kOX * mp, f + kOY * mp, f + kOZ * mp, f + kDX * mp, f + kDY * mp, f + kDZ * mp,
-                              f + kTmin * mp, f + kIX * mp, f + kIY * mp, f + kIZ * mp, f + kFX * mp, f + kFY * mp,
+                              f + kTmin * mp, f + kIX * mp, f + kIY * mp, f + kIZ * mp, f + kRX * mp, f + kRY * mp,
+                              f + kRZ * mp, f + kNX * mp, f + kNY * mp, f + kNZ * mp, f + kFX * mp, f + kFY * mp,
                               f + kFZ * mp, f + kSX * mp, f + kSY * mp, f + kSZ * mp, f + kPX * mp, f + kPY * mp,
                               f + kPZ * mp, s.meta.data(), s.hits.data()};
     for (uint32_t j = 0; j < n; ++j) {
@@ -137,7 +138,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
         for (uint32_t k = 0; k < kFields; ++k) probe.write(&f[k * mp + j], 4);
       s.hits[j] = initial_hit(ray);
     }
-    mbvh_stream::prepare(v, n);
+    mbvh_stream::prepare(v, n, d.mbvh->coord_bound);
     mbvh_stream::trace<N, K>(*d.mbvh, d.tris.get(), s.st, v, n, 0, order_, probe);
     for (uint32_t j = 0; j < n; ++j) {
       out[first + j] = finish_hit(s.hits[j]);

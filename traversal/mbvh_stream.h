@@ -53,12 +53,14 @@ inline ParamSpec order_param() {
 inline Order order_of(const SchemeConfig& cfg) { return cfg.get_choice("task_order") == "sum" ? Order::sum : Order::mean; }
 
 // The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
-// caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest.
+// caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest:
+// ix.. the reciprocal direction, rx.., nx.., fx.. the node test's fused-plane constants r, c_near
+// and c_far (kernels.h, FusedPlanes; NodeRay), sx.. and px.. the watertight test's.
 // `meta` packs the direction's sign octant (bits 0-2: reciprocal negative on x, y, z) and the
 // watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
 struct Rays {
   const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
-  float *ix, *iy, *iz, *fx, *fy, *fz, *sx, *sy, *sz;
+  float *ix, *iy, *iz, *rx, *ry, *rz, *nx, *ny, *nz, *fx, *fy, *fz, *sx, *sy, *sz;
   float *px, *py, *pz;  // the origin permuted to (kx, ky, kz) for the watertight test
   uint32_t* meta;
   Hit* hits;
@@ -72,10 +74,10 @@ struct Rays {
 inline size_t field_stride(size_t n) { return ((n + 7) & ~size_t(7)) + 16; }
 
 // RayCtx's constants for rays [0, n), eight at a time with the same float operations (1/d,
-// d[kx]/d[kz], ...), so the watertight test sees exactly RayCtx's values. Reads and writes up to
-// the next multiple of 8.
-inline void prepare(const Rays& v, uint32_t n) {
-  const __m256 one = _mm256_set1_ps(1.f), pad = _mm256_set1_ps(kFarPad), zero = _mm256_setzero_ps();
+// d[kx]/d[kz], ...), so the watertight test sees exactly RayCtx's values, and NodeRay's for the
+// tree's coordinate bound (MBVH::coord_bound). Reads and writes up to the next multiple of 8.
+inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
+  const __m256 one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
   const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
   // (kz == 0, kz == 1, swap) -> kx | ky << 2 | kz << 4, as RayCtx chooses them.
   static constexpr uint32_t kPerm[2][2][2] = {
@@ -85,9 +87,17 @@ inline void prepare(const Rays& v, uint32_t n) {
     const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
     const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
     _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
-    _mm256_store_ps(v.fx + k, _mm256_mul_ps(ix, pad));
-    _mm256_store_ps(v.fy + k, _mm256_mul_ps(iy, pad));
-    _mm256_store_ps(v.fz + k, _mm256_mul_ps(iz, pad));
+    {
+      const float* o[3] = {v.ox, v.oy, v.oz};
+      const __m256 in[3] = {ix, iy, iz};
+      float* r[3] = {v.rx, v.ry, v.rz};
+      float* cn[3] = {v.nx, v.ny, v.nz};
+      float* cf[3] = {v.fx, v.fy, v.fz};
+      for (int a = 0; a < 3; ++a) {
+        const FusedPlanes<8> p = fused_planes<8>(_mm256_load_ps(o[a] + k), in[a], _mm256_set1_ps(bound[a]));
+        _mm256_store_ps(r[a] + k, p.r), _mm256_store_ps(cn[a] + k, p.cn), _mm256_store_ps(cf[a] + k, p.cf);
+      }
+    }
     // kz = the dominant axis: a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2).
     const __m256 ax = _mm256_and_ps(dx, absmask), ay = _mm256_and_ps(dy, absmask), az = _mm256_and_ps(dz, absmask);
     const __m256 xy = _mm256_cmp_ps(ax, ay, _CMP_GE_OQ);
@@ -223,7 +233,7 @@ inline RayCtx ray_ctx(const Rays& v, uint32_t id) {
 template <class P>
 inline void probe_ray(const Rays& v, uint32_t id, P& probe) {
   if constexpr (P::enabled) {
-    for (const float* f : std::initializer_list<const float*>{v.ox, v.oy, v.oz, v.ix, v.iy, v.iz, v.fx, v.fy, v.fz, v.tmin})
+    for (const float* f : std::initializer_list<const float*>{v.rx, v.ry, v.rz, v.nx, v.ny, v.nz, v.fx, v.fy, v.fz, v.tmin})
       probe.read(f + id, 4);
     probe.read(v.meta + id, 4);
     probe.read(&v.hits[id], 4);
@@ -294,11 +304,18 @@ struct Scratch {
   }
 };
 
+// The node test's constants of ray `id`, from its record.
+template <int N>
+[[gnu::always_inline]] inline NodeRay<N> node_ray(const Rays& v, uint32_t id) {
+  return NodeRay<N>(Vec3{v.rx[id], v.ry[id], v.rz[id]}, Vec3{v.nx[id], v.ny[id], v.nz[id]},
+                    Vec3{v.fx[id], v.fy[id], v.fz[id]}, v.tmin[id], v.meta[id] & 7u);
+}
+
 // Ordinary single-ray traversal of the subtree `ref` for ray `id` (streams of one).
 template <int N, TriKernel K, class P>
 inline void single(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v, uint32_t id, uint32_t ref,
                    P& probe) {
-  const NodeRay<N> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]}, v.tmin[id]);
+  const NodeRay<N> nr = node_ray<N>(v, id);
   if constexpr (K == TriKernel::watertight) {
     mbvh_traverse<N, 4, K>(m, nullptr, nr, tri_ray(v, id), nullptr, ref, v.hits[id], s.single.data(), probe);
   } else {
@@ -382,8 +399,7 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       probe.read(&list[i], sizeof(uint16_t));
       const uint16_t id = list[i];
       probe_ray(v, id, probe);
-      const NodeRay<N> nr(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.ix[id], v.iy[id], v.iz[id]},
-                          Vec3{v.fx[id], v.fy[id], v.fz[id]}, v.tmin[id], v.meta[id] & 7u);
+      const NodeRay<N> nr = node_ray<N>(v, id);
       f tn;
       const f enter = box_test<N>(nd, nr, v.hits[id].t, tn);
       dsum = SN::add(dsum, SN::and_(tn, enter));

@@ -4,8 +4,9 @@
 // of mbvh4_single / mbvh8_single. mbvh_rs's one-ray fallback (thesis §2.2 / Tsakok 2009) and the
 // RayGrid's mini-MBVHs use the same loop.
 //
-// The arithmetic is the kernel library's (traversal/kernels.h): the node test is slab<N> (sign-
-// selected slabs, NaN slabs ignored, Ize far padding), the block test is the watertight test of
+// The arithmetic is the kernel library's (traversal/kernels.h): the node test is its fused slab
+// test (FusedPlanes: sign-selected slabs, one fma per plane, NaN slabs ignored, a proven per-ray
+// error bound instead of Ize's far padding), the block test is the watertight test of
 // Woop, Benthin and Wald (2013) on W lanes — the same float operations in the same order as the
 // one-ray test, so shared edges give exactly negated edge functions (-ffp-contract=off).
 #pragma once
@@ -87,34 +88,36 @@ inline __m256i sort8(__m256i k) {
 template <int N>
 inline constexpr std::array<std::array<uint32_t, 6>, 8> kPlaneRows = octant_plane_rows(0, 3 * N, N);
 
-// Per-ray constants of the N-wide box test: origin, reciprocal direction, the reciprocal padded
-// for far planes (Ize 2013: the pad multiplies the reciprocal; the rounding count — subtract,
-// reciprocal, pad, multiply — is the same as box_entry's, so the same bound holds), and the rows
-// of the near and far planes per axis (sign-selected slabs, Williams et al. 2005).
-// The origin is stored NEGATED: box_test computes plane + (-origin), which is plane - origin
-// exactly (IEEE negation is exact, and x + (-y) is the same operation as x - y, signed zeros
-// included), so the test's values are bit-identical to slab's. The point is the operand order:
-// addition commutes, so the node row's load folds into the vaddps as its memory operand — one
-// instruction per plane, six per node test fewer than a load and a vsubps (callgrind, sponza
-// primary 128x128, mbvh4_single: docs/PERFORMANCE.md, session 7).
+// Per-ray constants of the N-wide box test: the kernel library's fused slab test (kernels.h,
+// FusedPlanes: t = P * r + c, one fused multiply-add per plane, with c carrying a proven absolute
+// error bound so near distances are lower and far ones upper bounds of the exact ones), and the
+// rows of the near and far planes per axis (sign-selected slabs, Williams et al. 2005). `bound` is
+// the tree's MBVH::coord_bound (>= |P| of every plane the test reads).
+// It replaced Ize's (2013) subtract-and-multiply slab with a relative far pad: one instruction per
+// plane instead of two, and a shorter path from a node's load to its children's distances (the
+// loop waits on it at every node). Measured in docs/PERFORMANCE.md, session 13.
 template <int N>
 struct NodeRay {
   using f = typename simd::V<N>::f;
-  f nox, noy, noz, ix, iy, iz, fx, fy, fz, tmin;  // nox = -org.x
+  f rx, ry, rz, cnx, cny, cnz, cfx, cfy, cfz, tmin;  // FusedPlanes' r, c_near, c_far per axis
   const uint32_t* rows;  // kPlaneRows<N> of the ray's octant
   uint32_t octant;       // bit a set: direction a negative
-  NodeRay(const RayCtx& rc, float t0) : NodeRay(rc.org, rc.inv, t0) {}
-  NodeRay(Vec3 org, Vec3 inv, float t0)
-      : NodeRay(org, inv, Vec3{inv.x * kFarPad, inv.y * kFarPad, inv.z * kFarPad}, t0,
+  NodeRay(const RayCtx& rc, float t0, const float bound[3]) : NodeRay(rc.org, rc.inv, t0, bound) {}
+  NodeRay(Vec3 org, Vec3 inv, float t0, const float bound[3])
+      : NodeRay(fused_planes(org, inv, bound), t0,
                 uint32_t(std::signbit(inv.x)) | uint32_t(std::signbit(inv.y)) << 1 |
                     uint32_t(std::signbit(inv.z)) << 2) {}
-  // From constants computed ahead: far = inv * kFarPad and the octant's bits, as the constructor
-  // above computes them (mbvh_stream::prepare does so for a whole stream).
-  NodeRay(Vec3 org, Vec3 inv, Vec3 far, float t0, uint32_t oct) {
+  NodeRay(const FusedPlanes<4>& p, float t0, uint32_t oct) {
+    alignas(16) float r[4], cn[4], cf[4];
+    _mm_store_ps(r, p.r), _mm_store_ps(cn, p.cn), _mm_store_ps(cf, p.cf);
+    *this = NodeRay(Vec3{r[0], r[1], r[2]}, Vec3{cn[0], cn[1], cn[2]}, Vec3{cf[0], cf[1], cf[2]}, t0, oct);
+  }
+  // From constants computed ahead (mbvh_stream::prepare does so for a whole stream).
+  NodeRay(Vec3 r, Vec3 cn, Vec3 cf, float t0, uint32_t oct) {
     using S = simd::V<N>;
-    nox = S::set1(-org.x), noy = S::set1(-org.y), noz = S::set1(-org.z);
-    ix = S::set1(inv.x), iy = S::set1(inv.y), iz = S::set1(inv.z);
-    fx = S::set1(far.x), fy = S::set1(far.y), fz = S::set1(far.z);
+    rx = S::set1(r.x), ry = S::set1(r.y), rz = S::set1(r.z);
+    cnx = S::set1(cn.x), cny = S::set1(cn.y), cnz = S::set1(cn.z);
+    cfx = S::set1(cf.x), cfy = S::set1(cf.y), cfz = S::set1(cf.z);
     tmin = S::set1(t0);
     octant = oct;
     rows = kPlaneRows<N>[octant].data();
@@ -125,23 +128,25 @@ struct NodeRay {
 // NodeRay::rows; 0..7 makes them constants of the loop (mbvh_trace_rays' kPerOctant).
 inline constexpr int kAnyOctant = -1;
 
-// Entry distances `tn` of the N children and the lanes the ray enters before `tfar` (all-ones
-// lanes; movemask gives the bits): the kernel library's slab test on N lanes, one lane per child,
-// with the far reciprocal padded per ray (kPadRcp), plane - origin taken as NodeRay explains.
-// Oct (0..7, the ray's octant) fixes the plane rows at compile time: every load then has a
-// constant offset and folds into its vaddps.
+// Entry distances `tn` of the N children (lower bounds of the exact ones) and the lanes the ray
+// enters before `tfar` (all-ones lanes; movemask gives the bits): the fused slab test on N lanes,
+// one lane per child. As in the kernel library's slab, the new plane distance is max/min's first
+// operand, so a NaN one (an axis left out) constrains nothing. Oct (0..7, the ray's octant) fixes
+// the plane rows at compile time: every load then has a constant offset and folds into its fma.
 template <int N, int Oct = kAnyOctant>
 [[gnu::always_inline]] inline typename simd::V<N>::f box_test(const MBVHNode<N>& nd, const NodeRay<N>& r, float tfar,
                                                               typename simd::V<N>::f& tn_out) {
   using S = simd::V<N>;
   const float* b = &nd.box[0][0];
   const uint32_t* row = Oct == kAnyOctant ? r.rows : kPlaneRows<N>[Oct].data();
-  const typename S::f xn[3] = {S::add(r.nox, S::load(b + row[0])), S::add(r.noy, S::load(b + row[1])),
-                               S::add(r.noz, S::load(b + row[2]))};
-  const typename S::f xf[3] = {S::add(r.nox, S::load(b + row[3])), S::add(r.noy, S::load(b + row[4])),
-                               S::add(r.noz, S::load(b + row[5]))};
-  const typename S::f rn[3] = {r.ix, r.iy, r.iz}, rf[3] = {r.fx, r.fy, r.fz};
-  return slab<N, true>(xn, xf, rn, rf, r.tmin, S::set1(tfar), tn_out);
+  const typename S::f rr[3] = {r.rx, r.ry, r.rz}, cn[3] = {r.cnx, r.cny, r.cnz}, cf[3] = {r.cfx, r.cfy, r.cfz};
+  typename S::f n = r.tmin, f = S::set1(tfar);
+  for (int a = 0; a < 3; ++a) {
+    n = S::max(S::fma(S::load(b + row[a]), rr[a], cn[a]), n);
+    f = S::min(S::fma(S::load(b + row[3 + a]), rr[a], cf[a]), f);
+  }
+  tn_out = n;
+  return S::le(n, f);
 }
 
 // Per-ray constants of the W-wide watertight test: RayCtx's shear, broadcast. An 8-wide one also
@@ -563,7 +568,7 @@ void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange
   std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
   for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
     const RayCtx rc(ray);
-    const NodeRay<N> nr(rc, ray.tmin);
+    const NodeRay<N> nr(rc, ray.tmin, m.coord_bound);
     const TriRay<W> tr(rc, ray.tmin);
     if constexpr (kPerOctant) {
       with_octant(nr.octant, [&](auto oct) {

@@ -88,7 +88,8 @@ constexpr uint32_t kMaxChunk = 1u << kIdBits;
 // (SoA, eight rays per AVX2 instruction; the thesis' reason for SoA queues, §5.3.2). `meta`
 // packs the direction's sign octant (bits 0-2: the reciprocal is negative on x, y, z), and the
 // watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
-enum Derived : uint32_t { kIX, kIY, kIZ, kFX, kFY, kFZ, kSX, kSY, kSZ, kTexit, kPX, kPY, kPZ, kDerived };
+enum Derived : uint32_t { kIX, kIY, kIZ, kRX, kRY, kRZ, kNX, kNY, kNZ, kFX, kFY, kFZ, kSX, kSY, kSZ, kTexit,
+                          kPX, kPY, kPZ, kDerived };
 
 // What the octree walk needs of a ray.
 struct WalkRay {
@@ -359,7 +360,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
     const Octree& oct = *oct_;
     Ray ray{w.org, w.tmin, w.dir, w.tbest};
     const RayCtx rc(ray);
-    const NodeRay<N> nr(rc, w.tmin);
+    const NodeRay<N> nr(rc, w.tmin, mini<N>().coord_bound);
     const TriRay<4> tr(rc, w.tmin);
     Hit h{w.tbest, kNoHit, 0.f, 0.f};
     WalkRay cur = w;
@@ -563,14 +564,15 @@ class RayGrid final : public TraverserBase<RayGrid> {
       c.queued_rays += cnt;
       const float* b = qbase(s, q);
       const Stream v{{b + kOX * mp, b + kOY * mp, b + kOZ * mp, b + kDX * mp, b + kDY * mp, b + kDZ * mp,
-                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, d + kFX * mp, d + kFY * mp,
+                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, d + kRX * mp, d + kRY * mp,
+                      d + kRZ * mp, d + kNX * mp, d + kNY * mp, d + kNZ * mp, d + kFX * mp, d + kFY * mp,
                       d + kFZ * mp, d + kSX * mp, d + kSY * mp, d + kSZ * mp, d + kPX * mp, d + kPY * mp,
                       d + kPZ * mp, s.meta.data(), s.hits.data()},
                      reinterpret_cast<const uint32_t*>(b + kId * mp), d + kTexit * mp, s.axis.data()};
       if constexpr (P::enabled)
         for (uint32_t k = 0; k < cnt; ++k)
           for (uint32_t f = 0; f < kFields; ++f) probe.read(&b[f * mp + k], 4);
-      mbvh_stream::prepare(v, cnt);
+      mbvh_stream::prepare(v, cnt, mini<N>().coord_bound);
       for (uint32_t k = 0; k < cnt; ++k) v.hits[k] = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
 
       mbvh_stream::trace<N, K>(mini<N>(), tris_.get(), s.st, v, cnt, lf.mbvh_root, order_, probe);

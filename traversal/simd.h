@@ -67,6 +67,7 @@ struct V<1> {
   static f add(f a, f b) { return P##_add_ps(a, b); }                                            \
   static f sub(f a, f b) { return P##_sub_ps(a, b); }                                            \
   static f mul(f a, f b) { return P##_mul_ps(a, b); }                                            \
+  static f fma(f a, f b, f c) { return P##_fmadd_ps(a, b, c); } /* a * b + c, one rounding */    \
   static f div(f a, f b) { return P##_div_ps(a, b); }                                            \
   static f min(f a, f b) { return P##_min_ps(a, b); }                                            \
   static f max(f a, f b) { return P##_max_ps(a, b); }                                            \

@@ -191,7 +191,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
       const Ray& ray = s.r;
       const RayCtx rc(ray);
       const bool done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
-          m, nullptr, NodeRay<8>(rc, ray.tmin), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
+          m, nullptr, NodeRay<8>(rc, ray.tmin, m.coord_bound), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
           [&](uint32_t ref) {
             const uint32_t& e = tl.entry(ref);
             probe.read(&e, sizeof(uint32_t));
