@@ -91,15 +91,14 @@ struct CWRay {
     // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
     // E = 8 u (K + |o|) R + 2^-110 (1 + R).
     const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
-    const __m128 rr = p.r, cn = p.cn, cf = p.cf;
     alignas(16) float rs[4], ns[4], fs[4];
-    _mm_store_ps(rs, rr), _mm_store_ps(ns, cn), _mm_store_ps(fs, cf);
+    _mm_store_ps(rs, p.r), _mm_store_ps(ns, p.cn), _mm_store_ps(fs, p.cf);
     for (int a = 0; a < 3; ++a) r8[a] = _mm256_set1_ps(rs[a]), cn8[a] = _mm256_set1_ps(ns[a]), cf8[a] = _mm256_set1_ps(fs[a]);
-    r4 = rr;
+    r4 = p.r;
     tmin = _mm256_set1_ps(t0);
     bias = _mm_set1_epi32(127);
     __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
-    const int octant = _mm_movemask_ps(_mm_setr_ps(ray.inv.x, ray.inv.y, ray.inv.z, 0.f)) & 7;
+    const uint32_t octant = ray.octant();
     rows = kCWPlaneRows[octant].data();
     order = kCWOctantOrder[octant].data();
   }

@@ -46,6 +46,8 @@ inline constexpr float kFarPad = 1.f + 2.f * gamma_f(3);
 struct RayCtx {
   Vec3 org, dir, inv;
   int near_x, near_y, near_z;  // 1 where the direction's sign bit is set: enter through hi
+  // The ray octant of the octant-row tables (octant_plane_rows): bit a set = axis a entered through hi.
+  uint32_t octant() const { return uint32_t(near_x) | uint32_t(near_y) << 1 | uint32_t(near_z) << 2; }
   // Watertight shear (Woop et al. 2013, §3): permute so z is the dominant direction axis.
   int kx, ky, kz;
   float sx, sy, sz;

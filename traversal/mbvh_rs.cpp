@@ -73,8 +73,9 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 
  private:
   // The stream's SoA record: the ray fields, the derived constants, the hits.
-  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kIX, kIY, kIZ, kRX, kRY, kRZ, kNX, kNY, kNZ, kFX,
-                          kFY, kFZ, kSX, kSY, kSZ, kPX, kPY, kPZ, kFields };
+  // (No reciprocal-direction field: the node test reads the fused-plane constants rx..fz.)
+  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kRX, kRY, kRZ, kNX, kNY, kNZ, kFX, kFY, kFZ, kSX,
+                          kSY, kSZ, kPX, kPY, kPZ, kFields };
   struct Scratch {
     size_t mp = 0;  // the field arrays' stride (mbvh_stream::field_stride)
     aligned_vector<float> f;
@@ -124,7 +125,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     float* f = s.f.data();
     const size_t mp = s.mp;
     const mbvh_stream::Rays v{f + kOX * mp, f + kOY * mp, f + kOZ * mp, f + kDX * mp, f + kDY * mp, f + kDZ * mp,
-                              f + kTmin * mp, f + kIX * mp, f + kIY * mp, f + kIZ * mp, f + kRX * mp, f + kRY * mp,
+                              f + kTmin * mp, nullptr, nullptr, nullptr, f + kRX * mp, f + kRY * mp,
                               f + kRZ * mp, f + kNX * mp, f + kNY * mp, f + kNZ * mp, f + kFX * mp, f + kFY * mp,
                               f + kFZ * mp, f + kSX * mp, f + kSY * mp, f + kSZ * mp, f + kPX * mp, f + kPY * mp,
                               f + kPZ * mp, s.meta.data(), s.hits.data()};

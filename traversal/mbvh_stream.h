@@ -54,7 +54,8 @@ inline Order order_of(const SchemeConfig& cfg) { return cfg.get_choice("task_ord
 
 // The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
 // caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest:
-// ix.. the reciprocal direction, rx.., nx.., fx.. the node test's fused-plane constants r, c_near
+// ix.. the reciprocal direction (RayGrid's octree walk; null when no one reads it: mbvh_rs), rx..,
+// nx.., fx.. the node test's fused-plane constants r, c_near
 // and c_far (kernels.h, FusedPlanes; NodeRay), sx.. and px.. the watertight test's.
 // `meta` packs the direction's sign octant (bits 0-2: reciprocal negative on x, y, z) and the
 // watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
@@ -86,7 +87,7 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
   for (uint32_t k = 0; k < n; k += 8) {
     const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
     const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
-    _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
+    if (v.ix) _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
     {
       const float* o[3] = {v.ox, v.oy, v.oz};
       const __m256 in[3] = {ix, iy, iz};

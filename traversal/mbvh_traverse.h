@@ -102,11 +102,8 @@ struct NodeRay {
   f rx, ry, rz, cnx, cny, cnz, cfx, cfy, cfz, tmin;  // FusedPlanes' r, c_near, c_far per axis
   const uint32_t* rows;  // kPlaneRows<N> of the ray's octant
   uint32_t octant;       // bit a set: direction a negative
-  NodeRay(const RayCtx& rc, float t0, const float bound[3]) : NodeRay(rc.org, rc.inv, t0, bound) {}
-  NodeRay(Vec3 org, Vec3 inv, float t0, const float bound[3])
-      : NodeRay(fused_planes(org, inv, bound), t0,
-                uint32_t(std::signbit(inv.x)) | uint32_t(std::signbit(inv.y)) << 1 |
-                    uint32_t(std::signbit(inv.z)) << 2) {}
+  NodeRay(const RayCtx& rc, float t0, const float bound[3])
+      : NodeRay(fused_planes(rc.org, rc.inv, bound), t0, rc.octant()) {}
   NodeRay(const FusedPlanes<4>& p, float t0, uint32_t oct) {
     alignas(16) float r[4], cn[4], cf[4];
     _mm_store_ps(r, p.r), _mm_store_ps(cn, p.cn), _mm_store_ps(cf, p.cf);
