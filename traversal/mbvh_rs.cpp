@@ -73,12 +73,12 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 
  private:
   // The stream's SoA record: the ray fields, the derived constants, the hits.
-  // (No reciprocal-direction field: the node test reads the fused-plane constants rx..fz.)
-  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kRX, kRY, kRZ, kNX, kNY, kNZ, kFX, kFY, kFZ, kSX,
-                          kSY, kSZ, kPX, kPY, kPZ, kFields };
+  // (No reciprocal-direction field: the node test reads the fused-plane constants of `node`.)
+  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kSX, kSY, kSZ, kPX, kPY, kPZ, kFields };
   struct Scratch {
     size_t mp = 0;  // the field arrays' stride (mbvh_stream::field_stride)
     aligned_vector<float> f;
+    aligned_vector<float> node;  // the node test's record (mbvh_stream::node_fields)
     aligned_vector<uint32_t> meta;
     std::vector<Hit> hits;
     mbvh_stream::Scratch st;
@@ -95,6 +95,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     Scratch s;
     s.mp = mbvh_stream::field_stride(S);
     s.f.resize(kFields * s.mp);
+    s.node.resize(mbvh_stream::node_record_floats(S));
     s.meta.resize(s.mp);
     s.hits.resize(s.mp);
     s.st.reserve(N, d.mbvh->stats.max_depth + 1, S);
@@ -125,18 +126,18 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     float* f = s.f.data();
     const size_t mp = s.mp;
     const mbvh_stream::Rays v{f + kOX * mp, f + kOY * mp, f + kOZ * mp, f + kDX * mp, f + kDY * mp, f + kDZ * mp,
-                              f + kTmin * mp, nullptr, nullptr, nullptr, f + kRX * mp, f + kRY * mp,
-                              f + kRZ * mp, f + kNX * mp, f + kNY * mp, f + kNZ * mp, f + kFX * mp, f + kFY * mp,
-                              f + kFZ * mp, f + kSX * mp, f + kSY * mp, f + kSZ * mp, f + kPX * mp, f + kPY * mp,
-                              f + kPZ * mp, s.meta.data(), s.hits.data()};
+                              f + kTmin * mp, nullptr, nullptr, nullptr, s.node.data(), f + kSX * mp, f + kSY * mp,
+                              f + kSZ * mp, f + kPX * mp, f + kPY * mp, f + kPZ * mp, s.meta.data(), s.hits.data()};
     for (uint32_t j = 0; j < n; ++j) {
       const Ray& ray = batch.rays[first + j];
       probe.read(&ray, sizeof(Ray));
       f[kOX * mp + j] = ray.org.x, f[kOY * mp + j] = ray.org.y, f[kOZ * mp + j] = ray.org.z;
       f[kDX * mp + j] = ray.dir.x, f[kDY * mp + j] = ray.dir.y, f[kDZ * mp + j] = ray.dir.z;
       f[kTmin * mp + j] = ray.tmin;
-      if constexpr (P::enabled)
+      if constexpr (P::enabled) {
         for (uint32_t k = 0; k < kFields; ++k) probe.write(&f[k * mp + j], 4);
+        for (uint32_t k = 0; k <= mbvh_stream::kNOct; ++k) probe.write(mbvh_stream::node_fields(s.node.data(), j) + 8 * k, 4);
+      }
       s.hits[j] = initial_hit(ray);
     }
     mbvh_stream::prepare(v, n, d.mbvh->coord_bound);

@@ -28,7 +28,7 @@
 #include <algorithm>
 #include <bit>
 #include <cstdint>
-#include <initializer_list>
+#include <cstring>
 #include <vector>
 
 #include "traversal/mbvh_traverse.h"
@@ -52,16 +52,33 @@ inline ParamSpec order_param() {
 }
 inline Order order_of(const SchemeConfig& cfg) { return cfg.get_choice("task_order") == "sum" ? Order::sum : Order::mean; }
 
+// The node test's record of a stream (NodeRay's constants), AoSoA: rays in groups of eight, each
+// group kNodeFields rows of eight floats: the fused-plane constants r, c_near, c_far per axis
+// (kernels.h, FusedPlanes), tmin, and the octant (bits 0-2, as a float's bit pattern). One ray's
+// constants sit at one pointer with constant offsets, so the per-ray loop of the node test (the
+// stream's innermost loop) reads them with broadcasts off one register. With SoA arrays it
+// reloaded a spilled base pointer before each of its ten broadcasts (13 of its 62 instructions,
+// callgrind, sibenik_lucy bounce:3), and a lone ray deep in the tree touched ten lines instead of
+// six.
+enum NodeField : uint32_t { kNR = 0, kNCN = 3, kNCF = 6, kNTmin = 9, kNOct = 10, kNodeFields = 12 };
+// Floats of the node record of n rays (n rounded up to 8).
+inline size_t node_record_floats(size_t n) { return ((n + 7) / 8) * 8 * kNodeFields; }
+// Ray id's constants: field k is at [8 * k].
+inline const float* node_fields(const float* node, uint32_t id) {
+  return node + size_t(id >> 3) * (8 * kNodeFields) + (id & 7u);
+}
+
 // The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
 // caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest:
-// ix.. the reciprocal direction (RayGrid's octree walk; null when no one reads it: mbvh_rs), rx..,
-// nx.., fx.. the node test's fused-plane constants r, c_near
-// and c_far (kernels.h, FusedPlanes; NodeRay), sx.. and px.. the watertight test's.
-// `meta` packs the direction's sign octant (bits 0-2: reciprocal negative on x, y, z) and the
-// watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
+// ix.. the reciprocal direction (RayGrid's octree walk; null when no one reads it: mbvh_rs),
+// `node` the node test's record (above, node_record_floats(n) floats), sx.. and px.. the
+// watertight test's. `meta` packs the direction's sign octant (bits 0-2: reciprocal negative on
+// x, y, z) and the watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
 struct Rays {
   const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
-  float *ix, *iy, *iz, *rx, *ry, *rz, *nx, *ny, *nz, *fx, *fy, *fz, *sx, *sy, *sz;
+  float *ix, *iy, *iz;
+  float* node;
+  float *sx, *sy, *sz;
   float *px, *py, *pz;  // the origin permuted to (kx, ky, kz) for the watertight test
   uint32_t* meta;
   Hit* hits;
@@ -88,16 +105,16 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
     const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
     const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
     if (v.ix) _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
+    float* nd = v.node + size_t(k) * kNodeFields;  // this group of eight's node record
     {
       const float* o[3] = {v.ox, v.oy, v.oz};
       const __m256 in[3] = {ix, iy, iz};
-      float* r[3] = {v.rx, v.ry, v.rz};
-      float* cn[3] = {v.nx, v.ny, v.nz};
-      float* cf[3] = {v.fx, v.fy, v.fz};
       for (int a = 0; a < 3; ++a) {
         const FusedPlanes<8> p = fused_planes<8>(_mm256_load_ps(o[a] + k), in[a], _mm256_set1_ps(bound[a]));
-        _mm256_store_ps(r[a] + k, p.r), _mm256_store_ps(cn[a] + k, p.cn), _mm256_store_ps(cf[a] + k, p.cf);
+        _mm256_store_ps(nd + 8 * (kNR + a), p.r), _mm256_store_ps(nd + 8 * (kNCN + a), p.cn);
+        _mm256_store_ps(nd + 8 * (kNCF + a), p.cf);
       }
+      _mm256_store_ps(nd + 8 * kNTmin, _mm256_load_ps(v.tmin + k));
     }
     // kz = the dominant axis: a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2).
     const __m256 ax = _mm256_and_ps(dx, absmask), ay = _mm256_and_ps(dy, absmask), az = _mm256_and_ps(dz, absmask);
@@ -125,7 +142,9 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
     const int sx = _mm256_movemask_ps(ix), sy = _mm256_movemask_ps(iy), sz = _mm256_movemask_ps(iz);
     for (int j = 0; j < 8; ++j) {
       const uint32_t perm = kPerm[m0 >> j & 1][m1 >> j & 1][ms >> j & 1];
-      v.meta[k + j] = uint32_t(sx >> j & 1) | uint32_t(sy >> j & 1) << 1 | uint32_t(sz >> j & 1) << 2 | perm << 4;
+      const uint32_t oct = uint32_t(sx >> j & 1) | uint32_t(sy >> j & 1) << 1 | uint32_t(sz >> j & 1) << 2;
+      v.meta[k + j] = oct | perm << 4;
+      std::memcpy(nd + 8 * kNOct + j, &oct, sizeof oct);
     }
   }
 }
@@ -234,9 +253,8 @@ inline RayCtx ray_ctx(const Rays& v, uint32_t id) {
 template <class P>
 inline void probe_ray(const Rays& v, uint32_t id, P& probe) {
   if constexpr (P::enabled) {
-    for (const float* f : std::initializer_list<const float*>{v.rx, v.ry, v.rz, v.nx, v.ny, v.nz, v.fx, v.fy, v.fz, v.tmin})
-      probe.read(f + id, 4);
-    probe.read(v.meta + id, 4);
+    const float* nf = node_fields(v.node, id);
+    for (uint32_t k = 0; k <= kNOct; ++k) probe.read(nf + 8 * k, 4);
     probe.read(&v.hits[id], 4);
   }
 }
@@ -308,8 +326,12 @@ struct Scratch {
 // The node test's constants of ray `id`, from its record.
 template <int N>
 [[gnu::always_inline]] inline NodeRay<N> node_ray(const Rays& v, uint32_t id) {
-  return NodeRay<N>(Vec3{v.rx[id], v.ry[id], v.rz[id]}, Vec3{v.nx[id], v.ny[id], v.nz[id]},
-                    Vec3{v.fx[id], v.fy[id], v.fz[id]}, v.tmin[id], v.meta[id] & 7u);
+  const float* f = node_fields(v.node, id);
+  uint32_t oct;
+  std::memcpy(&oct, f + 8 * kNOct, sizeof oct);
+  return NodeRay<N>(Vec3{f[8 * kNR], f[8 * (kNR + 1)], f[8 * (kNR + 2)]},
+                    Vec3{f[8 * kNCN], f[8 * (kNCN + 1)], f[8 * (kNCN + 2)]},
+                    Vec3{f[8 * kNCF], f[8 * (kNCF + 1)], f[8 * (kNCF + 2)]}, f[8 * kNTmin], oct);
 }
 
 // Ordinary single-ray traversal of the subtree `ref` for ray `id` (streams of one).

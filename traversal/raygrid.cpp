@@ -88,8 +88,8 @@ constexpr uint32_t kMaxChunk = 1u << kIdBits;
 // (SoA, eight rays per AVX2 instruction; the thesis' reason for SoA queues, §5.3.2). `meta`
 // packs the direction's sign octant (bits 0-2: the reciprocal is negative on x, y, z), and the
 // watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
-enum Derived : uint32_t { kIX, kIY, kIZ, kRX, kRY, kRZ, kNX, kNY, kNZ, kFX, kFY, kFZ, kSX, kSY, kSZ, kTexit,
-                          kPX, kPY, kPZ, kDerived };
+// The node test's constants are in `node` (mbvh_stream::node_fields, AoSoA).
+enum Derived : uint32_t { kIX, kIY, kIZ, kSX, kSY, kSZ, kTexit, kPX, kPY, kPZ, kDerived };
 
 // What the octree walk needs of a ray.
 struct WalkRay {
@@ -142,6 +142,7 @@ struct Scratch {
   std::vector<uint32_t> leaf_partial; // per octree leaf: its partial queue or kNone
   // The queue being processed: derived per-ray constants (SoA), hits, and the MBVH/RS stacks.
   aligned_vector<float> derived;      // f * mp + slot
+  aligned_vector<float> node;         // the node test's record (mbvh_stream::node_fields)
   aligned_vector<uint32_t> meta, axis;
   std::vector<uint32_t> moving;       // the rays of the queue that move on to another leaf
   std::vector<Hit> hits;
@@ -460,6 +461,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
     s.leaf_partial.assign(oct.leaves.size(), kNone);
     if (s.derived.size() < kDerived * mp) {
       s.derived.resize(kDerived * mp);
+      s.node.resize(mbvh_stream::node_record_floats(mp));
       s.meta.resize(mp);
       s.axis.resize(mp);
       s.moving.resize(mp);
@@ -564,9 +566,8 @@ class RayGrid final : public TraverserBase<RayGrid> {
       c.queued_rays += cnt;
       const float* b = qbase(s, q);
       const Stream v{{b + kOX * mp, b + kOY * mp, b + kOZ * mp, b + kDX * mp, b + kDY * mp, b + kDZ * mp,
-                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, d + kRX * mp, d + kRY * mp,
-                      d + kRZ * mp, d + kNX * mp, d + kNY * mp, d + kNZ * mp, d + kFX * mp, d + kFY * mp,
-                      d + kFZ * mp, d + kSX * mp, d + kSY * mp, d + kSZ * mp, d + kPX * mp, d + kPY * mp,
+                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, s.node.data(), d + kSX * mp,
+                      d + kSY * mp, d + kSZ * mp, d + kPX * mp, d + kPY * mp,
                       d + kPZ * mp, s.meta.data(), s.hits.data()},
                      reinterpret_cast<const uint32_t*>(b + kId * mp), d + kTexit * mp, s.axis.data()};
       if constexpr (P::enabled)
