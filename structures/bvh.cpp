@@ -344,6 +344,7 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
   for (uint32_t i = 0; i < n; ++i) bvh.prim_index[i] = refs[i].id();
   bvh.nodes.resize(b.next_node.load());
   bvh.stats.max_depth = b.max_depth.load();
+  move_to_huge_pages(bvh.nodes);
   bvh.finish_stats(p, t0);
   return bvh;
 }

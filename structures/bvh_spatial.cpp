@@ -434,6 +434,7 @@ BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BV
   const auto t0 = std::chrono::steady_clock::now();
   const size_t n = refs.size();
   BVH bvh = SpatialBuilder(scene, params, sp, n).run(std::move(refs));
+  move_to_huge_pages(bvh.nodes);
   bvh.finish_stats(params, t0);
   return bvh;
 }

@@ -212,6 +212,8 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
   s.tri_bytes = out.blocks.size() * sizeof(TriBlock<8>);
   s.avg_children = s.nodes ? double(children) / s.nodes : 0;
   s.box_growth = growth_n ? growth / double(growth_n) : 0;
+  move_to_huge_pages(out.nodes);
+  move_to_huge_pages(out.blocks);
   s.compress_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

@@ -281,6 +281,7 @@ KDTree KDTree::build(const Scene& scene, const KDBuildParams& params) {
   st.refs_per_triangle = st.triangles ? double(st.references) / st.triangles : 0.0;
   st.bytes = tree.nodes.size() * sizeof(KDNode) + tree.prim_index.size() * sizeof(uint32_t);
   st.sah_cost = tree.compute_sah_cost(params);
+  move_to_huge_pages(tree.nodes);
   st.build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return tree;
 }

@@ -310,6 +310,9 @@ MBVH<N, W> MBVH<N, W>::collapse(const Scene& scene, const BVH& bvh, const MBVHBu
     }
   }
   s.sah_cost = cost + (m.nodes[0].num_children ? 1.0 : 0.0);
+  move_to_huge_pages(m.nodes);
+  move_to_huge_pages(m.blocks);
+  move_to_huge_pages(m.small);
   s.collapse_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return m;
 }
@@ -355,6 +358,9 @@ MBVH<N, W> MBVH<N, W>::concat(std::vector<MBVH>&& parts, std::vector<Placement>*
   }
   m.stats.avg_leaf_depth = m.stats.leaves ? leaf_depth_sum / m.stats.leaves : 0.0;
   count_arrays(m);
+  move_to_huge_pages(m.nodes);
+  move_to_huge_pages(m.blocks);
+  move_to_huge_pages(m.small);
   return m;
 }
 

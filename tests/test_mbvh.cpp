@@ -148,6 +148,36 @@ TEST(MBVH, CollapseIsIndependentOfBuildThreads) {
   check_invariants(s, MBVH<8, 8>::collapse(s, bvh, p), p);
 }
 
+// Arrays of 2 MiB and more start on a huge-page boundary, smaller ones keep their own alignment,
+// and move_to_huge_pages (structures/aligned.h) keeps the contents; the collapse leaves its arrays
+// intact through it (CollapseInvariants covers the small scenes, this a 2 MiB block array).
+TEST(MBVH, LargeArraysAreHugePageAligned) {
+  EXPECT_EQ(allocation_alignment(kHugePageBytes - 1, 64), 64u);
+  EXPECT_EQ(allocation_alignment(kHugePageBytes, 64), kHugePageBytes);
+  EXPECT_EQ(allocation_alignment(kHugePageBytes, 4 * kHugePageBytes), 4 * kHugePageBytes);
+  aligned_vector<MBVHNode<8>> small(16), large(kHugePageBytes / sizeof(MBVHNode<8>) + 3);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(small.data()) % 64, 0u);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(large.data()) % kHugePageBytes, 0u);
+  for (size_t i = 0; i < large.size(); ++i) large[i].num_children = uint32_t(i % 9);
+  large.reserve(large.size() * 2);  // reallocates: the first block is freed with its own alignment
+  move_to_huge_pages(large);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(large.data()) % kHugePageBytes, 0u);
+  EXPECT_EQ(large.size(), kHugePageBytes / sizeof(MBVHNode<8>) + 3);
+  for (size_t i = 0; i < large.size(); ++i) ASSERT_EQ(large[i].num_children, uint32_t(i % 9)) << i;
+  move_to_huge_pages(small);  // below 2 MiB: left as it is
+  EXPECT_EQ(small.size(), 16u);
+
+  const Scene s = random_triangles(9000, 7);  // > 2 MiB of 8-wide blocks with one triangle per leaf
+  MBVHBuildParams p;
+  p.bvh.max_leaf = 1;
+  p.small = 0;
+  const BVH bvh = BVH::build(s, p.bvh);
+  const auto m = MBVH<8, 8>::collapse(s, bvh, p);
+  ASSERT_GE(m.blocks.size() * sizeof(TriBlock<8>), kHugePageBytes);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(m.blocks.data()) % kHugePageBytes, 0u);
+  check_invariants(s, m, p);
+}
+
 TEST(MBVH, EightWideNodesAreFullerAndShallower) {
   const Scene s = random_triangles(20000, 11);
   MBVHBuildParams p;
