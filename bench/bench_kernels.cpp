@@ -56,8 +56,8 @@ template <TriKernel K>
 void BM_Triangle(benchmark::State& state) {
   const Data& d = data();
   TriangleSet ts;
-  ts.verts = d.tris;
-  ts.planes = d.planes;
+  ts.verts.assign(d.tris.begin(), d.tris.end());
+  ts.planes.assign(d.planes.begin(), d.planes.end());
   ts.prim_id.resize(d.tris.size());
   std::vector<RayCtx> ctx;
   for (const Ray& r : d.rays) ctx.emplace_back(r);

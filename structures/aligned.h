@@ -35,28 +35,37 @@ struct AlignedAllocator {
 template <class T, size_t Align = 64>
 using aligned_vector = std::vector<T, AlignedAllocator<T, Align>>;
 
-// Moves a finished array of 2 MiB or more into a block advised to use transparent huge pages
-// (MADV_HUGEPAGE: Linux's "madvise" mode, the common default, backs it with 2 MiB pages where it
-// can; elsewhere the advice is ignored and ordinary pages remain). A traversal of a scene of
-// millions of triangles fetches nodes scattered over hundreds of MiB: with 4 KiB pages nearly every
-// such fetch is also a TLB miss and a page walk. Embree's allocator makes the same request for its
-// BVH, so without it the large-scene comparisons would measure page sizes rather than traversal
-// (docs/PERFORMANCE.md, "Session 15: huge pages"). Done once at the end of a build, not in the
-// allocator: the builders' growing temporaries on huge pages made the spatial-split build ~15%
-// slower (measured, same section). Costs one copy of the array.
+// Huge pages for the arrays a traversal reads. A traversal of a scene of millions of triangles
+// fetches nodes scattered over hundreds of MiB: with 4 KiB pages nearly every such fetch is also a
+// TLB miss and a page walk. MADV_HUGEPAGE asks Linux to back a block with 2 MiB pages (its
+// "madvise" mode, the common default, does so only for advised blocks; elsewhere the advice is
+// ignored and ordinary pages remain). Embree's allocator makes the same request for its BVH, so
+// without it the large-scene comparisons would measure page sizes rather than traversal
+// (docs/PERFORMANCE.md, "Session 15: huge pages"). Only the finished arrays get it, not the
+// builders' growing temporaries: advising every large block in the allocator made the
+// spatial-split build ~15% slower (measured, same section).
+
+// Drops v's contents and gives it an untouched block of capacity n, advised to use huge pages when
+// it spans one (the advice applies from the first write, which is why the block must be fresh).
+template <class T, size_t Align>
+void reserve_on_huge_pages(aligned_vector<T, Align>& v, size_t n) {
+  aligned_vector<T, Align> fresh;
+  fresh.reserve(n);
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  const size_t bytes = n * sizeof(T);
+  if (bytes >= kHugePageBytes) (void)madvise(fresh.data(), bytes & ~(kHugePageBytes - 1), MADV_HUGEPAGE);  // a hint
+#endif
+  v.swap(fresh);
+}
+
+// Moves a finished array of 2 MiB or more onto huge pages (one copy of it).
 template <class T, size_t Align>
 void move_to_huge_pages(aligned_vector<T, Align>& v) {
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  const size_t bytes = v.size() * sizeof(T);
-  if (bytes < kHugePageBytes) return;
+  if (v.size() * sizeof(T) < kHugePageBytes) return;
   aligned_vector<T, Align> fresh;
-  fresh.reserve(v.size());  // allocated, not yet touched: the advice applies from the first write
-  (void)madvise(fresh.data(), bytes & ~(kHugePageBytes - 1), MADV_HUGEPAGE);  // a hint; failure keeps 4 KiB pages
+  reserve_on_huge_pages(fresh, v.size());
   fresh.assign(v.begin(), v.end());
   v.swap(fresh);
-#else
-  (void)v;
-#endif
 }
 
 }  // namespace tb

@@ -8,6 +8,7 @@
 #include <string_view>
 #include <vector>
 
+#include "structures/aligned.h"
 #include "structures/vec3.h"
 
 namespace tb {
@@ -34,8 +35,8 @@ struct alignas(16) PlaneTri {
 static_assert(sizeof(PlaneTri) == 48);
 
 struct TriangleSet {
-  std::vector<TriVerts> verts;      // always present
-  std::vector<PlaneTri> planes;     // only for the plane kernels
+  aligned_vector<TriVerts> verts;   // always present
+  aligned_vector<PlaneTri> planes;  // only for the plane kernels
   std::vector<uint32_t> prim_id;    // stored position -> scene triangle index
   size_t size() const { return verts.size(); }
   // `order[i]` = scene triangle stored at position i.
@@ -50,12 +51,14 @@ PlaneTri make_plane_tri(const TriVerts& t);
 
 template <class SceneT>
 void TriangleSet::build(const SceneT& scene, const std::vector<uint32_t>& order, TriKernel k) {
+  reserve_on_huge_pages(verts, order.size());  // the leaves' reads: structures/aligned.h
   verts.resize(order.size());
   prim_id = order;
   for (size_t i = 0; i < order.size(); ++i)
     verts[i] = {scene.vertex(order[i], 0), scene.vertex(order[i], 1), scene.vertex(order[i], 2)};
   planes.clear();
   if (uses_planes(k)) {
+    reserve_on_huge_pages(planes, verts.size());
     planes.resize(verts.size());
     for (size_t i = 0; i < verts.size(); ++i) planes[i] = make_plane_tri(verts[i]);
   }
