@@ -14,9 +14,7 @@
 
 #include "structures/scene.h"
 
-#ifndef TRAVBENCH_GIT_REV
-#define TRAVBENCH_GIT_REV "unknown"
-#endif
+#include "travbench_git_rev.h"  // TRAVBENCH_GIT_REV, generated at build time (cmake/git_revision.cmake)
 #ifndef TRAVBENCH_CXX_FLAGS
 #define TRAVBENCH_CXX_FLAGS ""
 #endif
