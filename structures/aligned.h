@@ -3,7 +3,6 @@
 #pragma once
 #include <cstddef>
 #include <new>
-#include <type_traits>
 #include <vector>
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -48,43 +47,16 @@ using aligned_vector = std::vector<T, AlignedAllocator<T, Align>>;
 
 // Drops v's contents and gives it an untouched block of capacity n, advised to use huge pages when
 // it spans one (the advice applies from the first write, which is why the block must be fresh).
-// Advises the whole huge pages of a block that AlignedAllocator gave (2 MiB aligned when it spans
-// one) and nothing has written yet. A hint: failure keeps ordinary pages.
-inline void advise_huge_pages([[maybe_unused]] void* block, [[maybe_unused]] size_t bytes) {
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  if (bytes >= kHugePageBytes) (void)madvise(block, bytes & ~(kHugePageBytes - 1), MADV_HUGEPAGE);
-#endif
-}
-
 template <class T, size_t Align>
 void reserve_on_huge_pages(aligned_vector<T, Align>& v, size_t n) {
   aligned_vector<T, Align> fresh;
   fresh.reserve(n);
-  advise_huge_pages(fresh.data(), n * sizeof(T));
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  const size_t bytes = n * sizeof(T);
+  if (bytes >= kHugePageBytes) (void)madvise(fresh.data(), bytes & ~(kHugePageBytes - 1), MADV_HUGEPAGE);  // a hint
+#endif
   v.swap(fresh);
 }
-
-// A fixed-size array of trivial T left uninitialised (pages a run never touches are never
-// faulted in), on huge pages when it spans one: scratch such as per-ray traversal stacks.
-template <class T, size_t Align = 64>
-class ScratchArray {
-  static_assert(std::is_trivially_default_constructible_v<T> && std::is_trivially_destructible_v<T>);
-
- public:
-  explicit ScratchArray(size_t n) : n_(n), p_(AlignedAllocator<T, Align>().allocate(n)) {
-    advise_huge_pages(p_, n * sizeof(T));
-  }
-  ~ScratchArray() { AlignedAllocator<T, Align>().deallocate(p_, n_); }
-  ScratchArray(const ScratchArray&) = delete;
-  ScratchArray& operator=(const ScratchArray&) = delete;
-  T* data() { return p_; }
-  T& operator[](size_t i) { return p_[i]; }
-  size_t size() const { return n_; }
-
- private:
-  size_t n_;
-  T* p_;
-};
 
 // Moves a finished array of 2 MiB or more onto huge pages (one copy of it).
 template <class T, size_t Align>

@@ -147,16 +147,12 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
       Hit hit;
     };
     static_assert(sizeof(Slot) == 64);
-    // Slots and stacks are read in queue order, scattered over the pool (65536 rays' stacks of
-    // 7 * depth + 10 entries: tens of MB): on huge pages, as the tree is (structures/aligned.h).
-    aligned_vector<Slot> slots;
-    reserve_on_huge_pages(slots, flight);
-    slots.resize(flight);
-    ScratchArray<MBVHStackEntry> stacks(flight * cap);
+    std::vector<Slot> slots(flight);
+    std::unique_ptr<MBVHStackEntry[]> stacks(new MBVHStackEntry[flight * cap]);
     std::vector<std::vector<uint32_t>> queues(tl.count());
     if constexpr (std::is_same_v<P, SplitProbe>) {
       probe.range(SplitProbe::state_slots, slots.data(), slots.size());
-      probe.range(SplitProbe::state_stacks, stacks.data(), flight * cap);
+      probe.range(SplitProbe::state_stacks, stacks.get(), flight * cap);
       probe.range(SplitProbe::node_array, m.nodes.data(), m.nodes.size());
       probe.range(SplitProbe::block_array, m.blocks.data(), m.blocks.size());
       probe.range(SplitProbe::small_array, m.small.data(), m.small.size());
