@@ -59,6 +59,17 @@ std::string cpu_model() {
   return "unknown";
 }
 
+// Linux's transparent-huge-page mode (the bracketed word of its setting: always, madvise or never):
+// the finished structures ask for huge pages (structures/aligned.h), and large-scene speeds
+// depend on whether they get them, so a result records the setting it was measured under.
+std::string transparent_hugepages() {
+  std::ifstream f("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::string line;
+  if (!std::getline(f, line)) return "unavailable";
+  const size_t a = line.find('['), b = line.find(']');
+  return a != std::string::npos && b != std::string::npos && b > a ? line.substr(a + 1, b - a - 1) : line;
+}
+
 }  // namespace
 
 nlohmann::json provenance() {
@@ -71,6 +82,7 @@ nlohmann::json provenance() {
           {"flags", TRAVBENCH_CXX_FLAGS},
           {"embree_version", TRAVBENCH_EMBREE_VERSION},
           {"git_revision", TRAVBENCH_GIT_REV},
+          {"transparent_hugepages", transparent_hugepages()},
           {"date", date}};
 }
 

@@ -1,5 +1,6 @@
 // Tidy result rows: one record per measured cell, columns in first-seen order, written as CSV
-// with a provenance sidecar JSON (machine, compiler, flags, Embree version, git revision, date).
+// with a provenance sidecar JSON (machine, compiler, flags, Embree version, git revision, the
+// transparent-huge-page setting, date).
 #pragma once
 #include <string>
 #include <utility>

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <regex>
 #include <set>
 #include <thread>
 
@@ -13,6 +14,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "harness/records.h"
 #include "harness/sweep.h"
 #include "test_util.h"
 
@@ -285,6 +287,17 @@ TEST(CLI, KilledRunKeepsItsCellsAndResumeCompletesIt) {
   const std::string meta((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
   EXPECT_NE(meta.find("\"complete\""), std::string::npos) << meta;
   std::filesystem::remove_all(dir);
+}
+
+// Every sidecar names the build (a revision taken at build time, "-dirty" when the code differed
+// from it) and the huge-page setting the structures were measured under.
+TEST(CLI, ProvenanceNamesTheRevisionAndThePageSetting) {
+  const nlohmann::json p = provenance();
+  const std::string rev = p.at("git_revision");
+  EXPECT_TRUE(rev == "unknown" || std::regex_match(rev, std::regex("[0-9a-f]{7,40}(-dirty)?"))) << rev;
+  const std::string thp = p.at("transparent_hugepages");
+  EXPECT_FALSE(thp.empty());
+  EXPECT_EQ(thp.find('['), std::string::npos) << thp;
 }
 
 // The command exited with `code` and its output says `needle`.
