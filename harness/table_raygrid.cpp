@@ -62,8 +62,6 @@ void raygrid_columns(Record& r, const Traverser& t) {
 }  // namespace
 
 int raygrid_table(const TableOptions& opt) {
-  const ThesisTable t9 = load_thesis_table("table09_raygrid_by_bounce.csv");
-  const ThesisRaysPerNode thesis_rays;
   Bench bench(load_scene(table_scene(opt)));
   const std::string tscene = thesis_scene(bench.scene().name);
   // The table's own parameter; the others are the schemes'.
@@ -72,6 +70,9 @@ int raygrid_table(const TableOptions& opt) {
   SchemeConfig base = opt.run.scheme_config;
   const bool sweep = param_to_bool(base.params.count("sweep") ? base.params.at("sweep") : sweep_param.fallback);
   base.params.erase("sweep");
+  // The thesis' values after every option is validated: a refused option says only why.
+  const ThesisTable t9 = load_thesis_table("table09_raygrid_by_bounce.csv");
+  const ThesisRaysPerNode thesis_rays;
   RunOptions run = opt.run;
   run.scheme_config = base;
   run.stats = true;  // Table 10 needs the instrumented pass
