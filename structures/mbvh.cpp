@@ -327,9 +327,10 @@ MBVH<N, W> MBVH<N, W>::concat(std::vector<MBVH>&& parts, std::vector<Placement>*
   }
   if (blocks > mbvh_ref::kMaxBlocks || small > mbvh_ref::kMaxBlocks)
     throw std::runtime_error("mbvh: too many triangle blocks");
-  m.nodes.reserve(nodes);
-  m.blocks.reserve(blocks);
-  m.small.reserve(small);
+  // Exact sizes, so the arrays fill these blocks in place: on huge pages without a final copy.
+  reserve_on_huge_pages(m.nodes, nodes);
+  reserve_on_huge_pages(m.blocks, blocks);
+  reserve_on_huge_pages(m.small, small);
   if (where) where->assign(parts.size(), {});
   double leaf_depth_sum = 0;
   for (size_t k = 0; k < parts.size(); ++k) {
@@ -358,9 +359,6 @@ MBVH<N, W> MBVH<N, W>::concat(std::vector<MBVH>&& parts, std::vector<Placement>*
   }
   m.stats.avg_leaf_depth = m.stats.leaves ? leaf_depth_sum / m.stats.leaves : 0.0;
   count_arrays(m);
-  move_to_huge_pages(m.nodes);
-  move_to_huge_pages(m.blocks);
-  move_to_huge_pages(m.small);
   return m;
 }
 
