@@ -11,7 +11,7 @@ namespace tb {
 
 std::string MBVHBuildParams::key(int width, int tri_width) const {
   return "mbvh:N=" + std::to_string(width) + ":W=" + std::to_string(tri_width) + ":merge=" + std::to_string(merge) +
-         (sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) : ":greedy") + ":small=" + std::to_string(small) + ":" +
+         (sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) + ":pc=" + std::to_string(prim_cost) : ":greedy") + ":small=" + std::to_string(small) + ":" +
          bvh.key();
 }
 
@@ -98,7 +98,7 @@ class Collapser {
     split_.assign(nb, {});
     leaf_.assign(nb, 0);
     node_split_.assign(nb, 1);
-    const double ci = p_.tri_cost / 100.0;
+    const double ci = p_.tri_cost / 100.0, cp = p_.prim_cost / 100.0;
     const uint32_t max_leaf = std::min<uint32_t>(mbvh_ref::kMaxLeafTris, uint32_t(std::max(p_.merge, W)));
     for (size_t k = order_.size(); k-- > 0;) {
       const uint32_t n = order_[k];
@@ -106,7 +106,8 @@ class Collapser {
       const double area = box_of(n).area();
       // Blocks tested; a small leaf's 4-wide block counts half (half the bytes and lanes).
       const double blocks = count_[n] <= out_.small_leaf ? 0.5 : double((count_[n] + W - 1) / W);
-      const double leaf_cost = count_[n] <= max_leaf || bn.is_leaf() ? ci * area * blocks : INFINITY;
+      const double leaf_cost =
+          count_[n] <= max_leaf || bn.is_leaf() ? area * (ci * blocks + cp * double(count_[n])) : INFINITY;
       auto& F = F_[n];
       if (bn.is_leaf()) {
         leaf_[n] = 1;

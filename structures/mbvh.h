@@ -73,6 +73,12 @@ struct MBVHBuildParams {
   // sum(area * node cost) + sum(area * block tests * tri_cost / 100).
   bool sah_collapse = false;
   int tri_cost = 100;  // cost of one triangle-block test in percent of a node visit
+  // SAH collapse: each triangle of a leaf adds this cost, in percent of a node visit, on top of its
+  // blocks' tri_cost. A block tests its W triangles at once, so with blocks alone a leaf of 1 and
+  // one of W triangles cost the same and every subtree of up to W triangles becomes one leaf, however
+  // far apart its triangles lie; but each triangle a ray's line crosses is a candidate whose
+  // distance is computed in double (traversal/mbvh_traverse.h), which a node visit could have culled.
+  int prim_cost = 0;
   // 8-wide blocks: leaves of up to `small` triangles (0 or 4) take a 4-wide block instead.
   int small = 4;
   std::string key(int width, int tri_width) const;

@@ -138,6 +138,26 @@ TEST(MBVH, CollapseInvariants) {
   }
 }
 
+// prim_cost charges each triangle of a leaf: on the room (big wall and floor triangles in leaves of
+// up to 16 triangles) the SAH collapse then makes smaller leaves, which hold every triangle as before.
+TEST(MBVH, PrimCostMakesSmallerLeaves) {
+  const Scene s = make_builtin_scene("room");
+  MBVHBuildParams p;
+  p.sah_collapse = true;
+  p.merge = 16;
+  p.small = 0;
+  const BVH bvh = BVH::build(s, p.bvh);
+  const auto base = MBVH<8, 8>::collapse(s, bvh, p);
+  p.prim_cost = 25;
+  const auto charged = MBVH<8, 8>::collapse(s, bvh, p);
+  check_invariants(s, charged, p);
+  EXPECT_LT(charged.stats.avg_leaf_tris, base.stats.avg_leaf_tris);
+  EXPECT_GT(charged.stats.leaves, base.stats.leaves);
+  MBVHBuildParams q = p;
+  q.prim_cost = 0;
+  EXPECT_NE(p.key(8, 8), q.key(8, 8));  // a structure of its own in the structure cache
+}
+
 TEST(MBVH, CollapseIsIndependentOfBuildThreads) {
   // The parallel binary builder numbers nodes differently; the collapse must not care.
   const Scene s = random_triangles(20000, 3);
@@ -526,7 +546,7 @@ TEST(MBVH, StreamChildOrderKeepsHits) {
 TEST(MBVH, ParametersAreValidated) {
   for (const auto& [k, v] : std::vector<std::pair<std::string, std::string>>{
            {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"},
-           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}, {"order", "fast"}}) {
+           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}, {"prim_cost", "-1"}, {"order", "fast"}}) {
     SchemeConfig cfg;
     cfg.params[k] = v;
     const char* scheme = k == "stream" ? "mbvh_rs" : k == "tri_width" || k == "order" ? "mbvh8_single" : "mbvh4_single";
@@ -590,10 +610,12 @@ TEST(MBVH, ChildOrdersMatchTheReferenceAndAutoPicksByBatch) {
       const RayBatch& b = bench.rays(spec);
       std::map<std::string, std::vector<Hit>> got;
       // "small": auto with 4-wide blocks for leaves of <= 4 triangles, tested through the low
-      // halves of the 8-wide ray's constants (lanes_of).
-      for (const std::string order : {"sort", "branching", "auto", "small"}) {
+      // halves of the 8-wide ray's constants (lanes_of); "prim_cost": auto on the tree of a
+      // collapse that charges each leaf triangle (smaller leaves).
+      for (const std::string order : {"sort", "branching", "auto", "small", "prim_cost"}) {
         SchemeConfig cfg;
         if (order == "small") cfg.params["small"] = "4";
+        else if (order == "prim_cost") cfg.params["prim_cost"] = "25";
         else cfg.params["order"] = order;
         const Accuracy a = test::accuracy_of(bench, "mbvh8_single", spec, cfg);
         if (w.rfind("hard:", 0) == 0 && hard_case_must_hit(w)) {

@@ -12,6 +12,9 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
                                  "binary -> wide collapse: greedy (Dammertz 2008) or SAH-optimal (Ylitie 2017)"),
                     int_param("tri_cost", p.tri_cost, 1, 10000,
                               "SAH collapse: a triangle-block test's cost in percent of a node visit"),
+                    int_param("prim_cost", d.prim_cost, 0, 10000,
+                              "SAH collapse: each triangle of a leaf adds this cost in percent of a node visit "
+                              "(a candidate's double-precision distance; 0: only block tests count)"),
                     int_choice_param("small", d.small, {0, 4},
                                      "8-wide blocks: leaves of at most this many triangles take a 4-wide block")};
 }
@@ -22,6 +25,7 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
   p.merge = cfg.find_int("merge").value_or(d.merge);
   p.sah_collapse = cfg.find_choice("collapse").value_or(d.sah ? "sah" : "greedy") == "sah";
   p.tri_cost = cfg.get_int("tri_cost");
+  p.prim_cost = cfg.get_int("prim_cost");
   p.small = cfg.find_int("small").value_or(d.small);
   return p;
 }
