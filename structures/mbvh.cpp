@@ -10,9 +10,13 @@
 namespace tb {
 
 std::string MBVHBuildParams::key(int width, int tri_width) const {
+  char share[32];
+  std::snprintf(share, sizeof share, "%g", prim_share);
+  const std::string collapse = sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) + ":pc=" +
+                                                 std::to_string(prim_cost) + ":ps=" + share
+                                           : ":greedy";
   return "mbvh:N=" + std::to_string(width) + ":W=" + std::to_string(tri_width) + ":merge=" + std::to_string(merge) +
-         (sah_collapse ? ":sah:tc=" + std::to_string(tri_cost) + ":pc=" + std::to_string(prim_cost) : ":greedy") + ":small=" + std::to_string(small) + ":" +
-         bvh.key();
+         collapse + ":small=" + std::to_string(small) + ":" + bvh.key();
 }
 
 std::string MBVHStats::describe() const {
@@ -107,7 +111,7 @@ class Collapser {
       // Blocks tested; a small leaf's 4-wide block counts half (half the bytes and lanes).
       const double blocks = count_[n] <= out_.small_leaf ? 0.5 : double((count_[n] + W - 1) / W);
       const double leaf_cost =
-          count_[n] <= max_leaf || bn.is_leaf() ? area * (ci * blocks + cp * double(count_[n])) : INFINITY;
+          count_[n] <= max_leaf || bn.is_leaf() ? area * (ci * blocks + cp * charged_tris(n, area)) : INFINITY;
       auto& F = F_[n];
       if (bn.is_leaf()) {
         leaf_[n] = 1;
@@ -137,6 +141,23 @@ class Collapser {
       }
     }
   }
+  // The triangles of subtree n that prim_cost charges as one leaf of surface area `area`: all of
+  // them, or with prim_share those whose box clipped to the subtree's box (a spatial-split reference
+  // is clipped to its leaf) has at least that share of `area`.
+  double charged_tris(uint32_t n, double area) const {
+    if (p_.prim_cost == 0 || p_.prim_share <= 0.f) return double(count_[n]);
+    const AABB nb = box_of(n);
+    uint32_t big = 0;
+    for (uint32_t k = first_[n]; k < first_[n] + count_[n]; ++k) {
+      const uint32_t tri = bvh_.prim_index[k];
+      AABB tb;
+      for (int c = 0; c < 3; ++c) tb.grow(scene_.vertex(tri, c));
+      tb.lo = vmax(tb.lo, nb.lo), tb.hi = vmin(tb.hi, nb.hi);
+      big += double(tb.area()) >= double(p_.prim_share) * area;
+    }
+    return double(big);
+  }
+
   // The roots of binary subtree n as a forest of at most j wide-tree slots.
   void roots(uint32_t n, int j, std::vector<uint32_t>& out) const {
     while (j > 1 && split_[n][j] == 0) --j;

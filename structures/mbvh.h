@@ -79,6 +79,11 @@ struct MBVHBuildParams {
   // far apart its triangles lie; but each triangle a ray's line crosses is a candidate whose
   // distance is computed in double (traversal/mbvh_traverse.h), which a node visit could have culled.
   int prim_cost = 0;
+  // Which triangles prim_cost charges: those whose box, clipped to the leaf's, has at least this
+  // share of the leaf box's surface area (0: every triangle). A leaf of small neighbouring triangles
+  // (a scanned mesh) is then charged little and keeps its full blocks; one of triangles as large as
+  // the leaf (walls, floors, steps), whose lines most rays that enter the leaf cross, is split.
+  float prim_share = 0.f;
   // 8-wide blocks: leaves of up to `small` triangles (0 or 4) take a 4-wide block instead.
   int small = 4;
   std::string key(int width, int tri_width) const;

@@ -156,6 +156,20 @@ TEST(MBVH, PrimCostMakesSmallerLeaves) {
   MBVHBuildParams q = p;
   q.prim_cost = 0;
   EXPECT_NE(p.key(8, 8), q.key(8, 8));  // a structure of its own in the structure cache
+  // prim_share: charging only the triangles whose box fills half the leaf box gives another tree
+  // (leaf and node costs both change, so not necessarily smaller leaves); a share so small that every
+  // triangle of the room (none is a line) passes charges them all, as prim_share = 0 does.
+  q = p;
+  q.prim_share = 0.5f;
+  const auto half = MBVH<8, 8>::collapse(s, bvh, q);
+  check_invariants(s, half, q);
+  EXPECT_NE(half.stats.avg_leaf_tris, charged.stats.avg_leaf_tris);
+  EXPECT_NE(p.key(8, 8), q.key(8, 8));
+  q.prim_share = 1e-6f;
+  const auto all = MBVH<8, 8>::collapse(s, bvh, q);
+  EXPECT_EQ(all.stats.leaves, charged.stats.leaves);
+  EXPECT_EQ(all.stats.avg_leaf_tris, charged.stats.avg_leaf_tris);
+  EXPECT_EQ(all.stats.sah_cost, charged.stats.sah_cost);
 }
 
 TEST(MBVH, CollapseIsIndependentOfBuildThreads) {
@@ -546,7 +560,8 @@ TEST(MBVH, StreamChildOrderKeepsHits) {
 TEST(MBVH, ParametersAreValidated) {
   for (const auto& [k, v] : std::vector<std::pair<std::string, std::string>>{
            {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"},
-           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}, {"prim_cost", "-1"}, {"order", "fast"}}) {
+           {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}, {"prim_cost", "-1"}, {"prim_share", "2"},
+           {"order", "fast"}}) {
     SchemeConfig cfg;
     cfg.params[k] = v;
     const char* scheme = k == "stream" ? "mbvh_rs" : k == "tri_width" || k == "order" ? "mbvh8_single" : "mbvh4_single";
@@ -610,13 +625,14 @@ TEST(MBVH, ChildOrdersMatchTheReferenceAndAutoPicksByBatch) {
       const RayBatch& b = bench.rays(spec);
       std::map<std::string, std::vector<Hit>> got;
       // "small": auto with 4-wide blocks for leaves of <= 4 triangles, tested through the low
-      // halves of the 8-wide ray's constants (lanes_of); "prim_cost": auto on the tree of a
-      // collapse that charges each leaf triangle (smaller leaves).
-      for (const std::string order : {"sort", "branching", "auto", "small", "prim_cost"}) {
+      // halves of the 8-wide ray's constants (lanes_of); "prim_cost", "prim_share": auto on the
+      // trees of a collapse that charges each leaf triangle, or the large ones.
+      for (const std::string order : {"sort", "branching", "auto", "small", "prim_cost", "prim_share"}) {
         SchemeConfig cfg;
         if (order == "small") cfg.params["small"] = "4";
-        else if (order == "prim_cost") cfg.params["prim_cost"] = "25";
+        else if (order.rfind("prim_", 0) == 0) cfg.params["prim_cost"] = "25";
         else cfg.params["order"] = order;
+        if (order == "prim_share") cfg.params["prim_share"] = "0.5";
         const Accuracy a = test::accuracy_of(bench, "mbvh8_single", spec, cfg);
         if (w.rfind("hard:", 0) == 0 && hard_case_must_hit(w)) {
           EXPECT_EQ(a.false_miss, 0u) << scene << " " << w << " " << order;  // no leak

@@ -15,6 +15,9 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
                     int_param("prim_cost", d.prim_cost, 0, 10000,
                               "SAH collapse: each triangle of a leaf adds this cost in percent of a node visit "
                               "(a candidate's double-precision distance; 0: only block tests count)"),
+                    real_param("prim_share", d.prim_share, 0, 1,
+                               "SAH collapse: prim_cost charges only triangles whose box, clipped to the leaf's, "
+                               "has at least this share of the leaf box's surface area (0: every triangle)"),
                     int_choice_param("small", d.small, {0, 4},
                                      "8-wide blocks: leaves of at most this many triangles take a 4-wide block")};
 }
@@ -26,6 +29,7 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
   p.sah_collapse = cfg.find_choice("collapse").value_or(d.sah ? "sah" : "greedy") == "sah";
   p.tri_cost = cfg.get_int("tri_cost");
   p.prim_cost = cfg.get_int("prim_cost");
+  p.prim_share = float(cfg.get_real("prim_share"));
   p.small = cfg.find_int("small").value_or(d.small);
   return p;
 }

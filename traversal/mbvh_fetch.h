@@ -21,6 +21,7 @@ struct MBVHDefaults {
   int small = 4;
   bool spatial = false;  // the binary BVH's spatial splits (bvh_param_specs)
   int prim_cost = 0;     // MBVHBuildParams::prim_cost (the SAH collapse's per-triangle cost, %)
+  float prim_share = 0;  // MBVHBuildParams::prim_share (which triangles prim_cost charges)
 };
 // mbvh8_single's (and treelet_queue's, which runs its loop on the same cached tree): SAH collapse,
 // leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0): one leaf path
@@ -32,7 +33,7 @@ struct MBVHDefaults {
 // "Spatial splits by default").
 inline constexpr MBVHDefaults kMBVH8Defaults{4, 16, true, 0, true};
 // `bins`, `leaf_size` (binary BVH), `merge`, `collapse` (greedy | sah), `tri_cost`, `prim_cost`,
-// `small` (0 | 4).
+// `prim_share`, `small` (0 | 4).
 ParamSpecs mbvh_param_specs(const MBVHDefaults& d);
 // Reads them; a parameter declared with auto_default() (its default depends on another, as
 // mbvh_rs's merge and collapse on its width) takes its value from `d`.
