@@ -8,8 +8,10 @@
 // the thesis' greedy rule: nodes fill 6-7 of 8 slots instead of ~4.4, for 3-12% more rays/s on
 // sponza, conference and sibenik_lucy (bounce:2); leaves of up to 16 triangles (two blocks).
 // Parameters: tri_width=4|8 (SSE or AVX2 triangle blocks), collapse=sah|greedy, merge (largest
-// leaf), tri_cost (block test vs node visit, %), small (0 | 4: 4-wide blocks for leaves of <= 4
-// triangles; default 0), leaf_size and bins (binary BVH).
+// leaf), tri_cost (block test vs node visit, %), prim_cost and prim_share (a per-triangle leaf cost
+// in the collapse, on every triangle or on those as large as a share of the leaf box; default 0:
+// measured neutral on average, docs/PERFORMANCE.md session 16), small (0 | 4: 4-wide blocks for
+// leaves of <= 4 triangles; default 0), leaf_size and bins (binary BVH).
 // The watertight 8-wide case runs mbvh_traverse (traversal/mbvh_traverse.h) with the child order
 // of `order`: auto (default) takes ChildOrder::branching for common-origin batches (primary rays:
 // coherent, so the branches on the number of entered children predict well, and the nearest
