@@ -298,6 +298,8 @@ TEST(CLI, ProvenanceNamesTheRevisionAndThePageSetting) {
   const std::string thp = p.at("transparent_hugepages");
   EXPECT_FALSE(thp.empty());
   EXPECT_EQ(thp.find('['), std::string::npos) << thp;
+  const std::string id = p.at("cpu_id");  // e.g. "AuthenticAMD family 25 model 1 stepping 1, no avx512f"
+  EXPECT_TRUE(std::regex_search(id, std::regex(" family [0-9?]+ model [0-9?]+ stepping [0-9?]+, (no )?avx512f$"))) << id;
 }
 
 // The command exited with `code` and its output says `needle`.
