@@ -55,9 +55,10 @@ class Collapser {
   void run() {
     const uint32_t tris = uint32_t(bvh_.prim_index.size());
     // The finished arrays are written in place on huge pages (structures/aligned.h), reserved for
-    // as many nodes and blocks as the tree can need in practice: the copy onto huge pages at the end
-    // (and the 4 KiB page faults of writing the first block, a fifth of the collapse on sponza in
-    // this paravirtualised VM) is then needed only where a vector outgrew its reservation.
+    // as many nodes and blocks as the tree can need in practice (untouched pages of the reservation
+    // are never backed). Writing the blocks into fresh 4 KiB pages and then copying them onto huge
+    // pages was most of the collapse's time on sponza in a paravirtualised VM (37 -> ~7 ms,
+    // docs/PERFORMANCE.md session 16); the copy remains for a vector that outgrew its reservation.
     reserve_on_huge_pages(out_.nodes, std::max<size_t>(1, 2 * tris / N + 1));
     reserve_on_huge_pages(out_.blocks, (tris + W - 1) / W + tris / 2 + 1);
     reserved_[0] = out_.nodes.data(), reserved_[1] = out_.blocks.data();

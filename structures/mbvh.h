@@ -81,8 +81,10 @@ struct MBVHBuildParams {
   int prim_cost = 0;
   // Which triangles prim_cost charges: those whose box, clipped to the leaf's, has at least this
   // share of the leaf box's surface area (0: every triangle). A leaf of small neighbouring triangles
-  // (a scanned mesh) is then charged little and keeps its full blocks; one of triangles as large as
-  // the leaf (walls, floors, steps), whose lines most rays that enter the leaf cross, is split.
+  // (a scanned mesh) is then charged little; one of triangles as large as the leaf (walls, floors,
+  // steps), whose lines most rays that enter the leaf cross, fully. Neither parameter changes leaf
+  // sizes monotonically (a node's cost holds its children's charges too): docs/PERFORMANCE.md,
+  // session 16, measures them; both 0 by default.
   float prim_share = 0.f;
   // 8-wide blocks: leaves of up to `small` triangles (0 or 4) take a 4-wide block instead.
   int small = 4;
