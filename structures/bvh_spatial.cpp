@@ -139,8 +139,8 @@ class SpatialBuilder {
     sbins_ = count < uint32_t(sp_.min_refs) ? std::clamp(sp_.small_spatial_bins, 2, sbins_all_) : sbins_all_;
     // Spatial splits only where the object split's children overlap noticeably (Stich §4.3) and
     // the duplication budget is not spent.
-    if (used_ < budget_ && (best.kind == Split::none ||
-                            intersect(best.left, best.right).area() > sp_.alpha * root_area_)) {
+    const float overlap = best.kind == Split::none ? INFINITY : intersect(best.left, best.right).area();
+    if (used_ < budget_ && overlap > sp_.alpha * root_area_ && overlap > sp_.overlap * box.area()) {
       const Split s = spatial_split(refs, box);
       if (s.cost < best.cost) best = s;
     }

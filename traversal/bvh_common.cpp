@@ -12,6 +12,9 @@ ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
           real_param("split_alpha", 1e-5, 0, 1,
                      "spatial splits: tried where the object split's children overlap by more than this fraction of "
                      "the root's surface area"),
+          real_param("split_overlap", d.split_overlap, 0, 1,
+                     "spatial splits: also only where that overlap exceeds this fraction of the node's own surface "
+                     "area (Embree 3 uses 0.2; 0: off)"),
           real_param("split_budget", 1.0, 0, 16, "spatial splits: at most this many extra references per triangle"),
           real_param("split_wall", d.split_wall, 0, 1,
                      "spatial splits: a triangle spanning this fraction of the scene's extent on two axes (a "
@@ -26,6 +29,7 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   p.split_alpha = float(cfg.get_real("split_alpha"));
   p.split_budget = float(cfg.get_real("split_budget"));
   p.split_wall = float(cfg.get_real("split_wall"));
+  p.split_overlap = float(cfg.get_real("split_overlap"));
   return p;
 }
 
