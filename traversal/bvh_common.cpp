@@ -14,7 +14,7 @@ ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
                      "the root's surface area"),
           real_param("split_overlap", d.split_overlap, 0, 1,
                      "spatial splits: also only where that overlap exceeds this fraction of the node's own surface "
-                     "area (Embree 3 uses 0.2; 0: off)"),
+                     "area (Embree 3.13 uses 0.1; 0: off)"),
           real_param("split_budget", 1.0, 0, 16, "spatial splits: at most this many extra references per triangle"),
           real_param("split_wall", d.split_wall, 0, 1,
                      "spatial splits: a triangle spanning this fraction of the scene's extent on two axes (a "
