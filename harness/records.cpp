@@ -52,32 +52,30 @@ std::string quote(const std::string& s) {
   return q + "\"";
 }
 
-std::string cpu_model() {
+// The processor, from the first block of /proc/cpuinfo: `name` its marketing name ("unknown"
+// without one), `id` what tells machines apart beyond it (a VM may name only "AMD EPYC"): vendor,
+// family, model and stepping, and whether it has AVX-512 (-march=native then compiles for it, and
+// Embree's default ISA uses it), so that results from different machines are not compared by mistake.
+struct CpuInfo {
+  std::string name, id;
+};
+CpuInfo cpu_info() {
   std::ifstream f("/proc/cpuinfo");
-  for (std::string line; std::getline(f, line);)
-    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
-  return "unknown";
-}
-
-// The processor beyond its marketing name (a VM may report only "AMD EPYC"): vendor, family, model
-// and stepping, and whether it has AVX-512 (-march=native then compiles for it, and Embree's
-// default ISA uses it), so that results from different machines are not compared by mistake.
-std::string cpu_id() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string vendor = "?", family = "?", model = "?", stepping = "?", avx512 = "no avx512f";
+  std::string name = "unknown", vendor = "?", family = "?", model = "?", stepping = "?", avx512 = "no avx512f";
   auto value = [](const std::string& line) {
     const size_t c = line.find(':');
     return c == std::string::npos ? std::string() : line.substr(std::min(line.size(), c + 2));
   };
   for (std::string line; std::getline(f, line) && !line.empty();) {  // the first processor's block
-    if (line.rfind("vendor_id", 0) == 0) vendor = value(line);
+    if (line.rfind("model name", 0) == 0) name = value(line);
+    else if (line.rfind("vendor_id", 0) == 0) vendor = value(line);
     else if (line.rfind("cpu family", 0) == 0) family = value(line);
     else if (line.rfind("model\t", 0) == 0 || line.rfind("model :", 0) == 0) model = value(line);
     else if (line.rfind("stepping", 0) == 0) stepping = value(line);
     else if (line.rfind("flags", 0) == 0 && (" " + value(line) + " ").find(" avx512f ") != std::string::npos)
       avx512 = "avx512f";
   }
-  return vendor + " family " + family + " model " + model + " stepping " + stepping + ", " + avx512;
+  return {name, vendor + " family " + family + " model " + model + " stepping " + stepping + ", " + avx512};
 }
 
 // Linux's transparent-huge-page mode (the bracketed word of its setting: always, madvise or never):
@@ -97,8 +95,9 @@ nlohmann::json provenance() {
   const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
   char date[32];
   std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
-  return {{"cpu", cpu_model()},
-          {"cpu_id", cpu_id()},
+  const CpuInfo cpu = cpu_info();
+  return {{"cpu", cpu.name},
+          {"cpu_id", cpu.id},
           {"hardware_threads", std::thread::hardware_concurrency()},
           {"compiler", std::string("g++ ") + __VERSION__},
           {"flags", TRAVBENCH_CXX_FLAGS},

@@ -26,13 +26,6 @@ struct Split {
   AABB left, right;
 };
 
-AABB intersect(const AABB& a, const AABB& b) {
-  AABB r;
-  r.lo = vmax(a.lo, b.lo);
-  r.hi = vmin(a.hi, b.hi);
-  return r;
-}
-
 struct Task {
   uint32_t node, depth;
   std::vector<SpatialRef> refs;

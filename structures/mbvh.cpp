@@ -157,13 +157,8 @@ class Collapser {
     if (p_.prim_cost == 0 || p_.prim_share <= 0.f) return double(count_[n]);
     const AABB nb = box_of(n);
     uint32_t big = 0;
-    for (uint32_t k = first_[n]; k < first_[n] + count_[n]; ++k) {
-      const uint32_t tri = bvh_.prim_index[k];
-      AABB tb;
-      for (int c = 0; c < 3; ++c) tb.grow(scene_.vertex(tri, c));
-      tb.lo = vmax(tb.lo, nb.lo), tb.hi = vmin(tb.hi, nb.hi);
-      big += double(tb.area()) >= double(p_.prim_share) * area;
-    }
+    for (uint32_t k = first_[n]; k < first_[n] + count_[n]; ++k)
+      big += double(intersect(scene_.triangle_bounds(bvh_.prim_index[k]), nb).area()) >= double(p_.prim_share) * area;
     return double(big);
   }
 

@@ -58,5 +58,7 @@ struct AABB {
     return e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
   }
 };
+// The common part of two boxes (empty when they do not overlap).
+inline AABB intersect(const AABB& a, const AABB& b) { return {vmax(a.lo, b.lo), vmin(a.hi, b.hi)}; }
 
 }  // namespace tb

@@ -12,10 +12,10 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
                                  "binary -> wide collapse: greedy (Dammertz 2008) or SAH-optimal (Ylitie 2017)"),
                     int_param("tri_cost", p.tri_cost, 1, 10000,
                               "SAH collapse: a triangle-block test's cost in percent of a node visit"),
-                    int_param("prim_cost", d.prim_cost, 0, 10000,
+                    int_param("prim_cost", p.prim_cost, 0, 10000,
                               "SAH collapse: each triangle of a leaf adds this cost in percent of a node visit "
                               "(a candidate's double-precision distance; 0: only block tests count)"),
-                    real_param("prim_share", d.prim_share, 0, 1,
+                    real_param("prim_share", p.prim_share, 0, 1,
                                "SAH collapse: prim_cost charges only triangles whose box, clipped to the leaf's, "
                                "has at least this share of the leaf box's surface area (0: every triangle)"),
                     int_choice_param("small", d.small, {0, 4},

@@ -20,8 +20,6 @@ struct MBVHDefaults {
   bool sah = false;
   int small = 4;
   bool spatial = false;  // the binary BVH's spatial splits (bvh_param_specs)
-  int prim_cost = 0;     // MBVHBuildParams::prim_cost (the SAH collapse's per-triangle cost, %)
-  float prim_share = 0;  // MBVHBuildParams::prim_share (which triangles prim_cost charges)
 };
 // mbvh8_single's (and treelet_queue's, which runs its loop on the same cached tree): SAH collapse,
 // leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0): one leaf path
