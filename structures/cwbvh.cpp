@@ -137,6 +137,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
   double growth = 0;
   uint64_t growth_n = 0, children = 0;
   double bound[3] = {0, 0, 0};
+  int e_min = 127, e_max = -128;
   while (!stack.empty()) {
     const Item it = stack.back();
     stack.pop_back();
@@ -195,12 +196,15 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
     // Unused slots (meta 0) reference a real triangle: the node's first leaf block, or block 0.
     if (first_block + block_off >= kCWMaxBlocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
     n.leaf_base = cw_leaf_ref(block_off ? first_block : 0, 1);
-    for (int a = 0; a < 3; ++a)
+    for (int a = 0; a < 3; ++a) {
       bound[a] = std::max(bound[a], std::fabs(double(n.p[a])) + 255.0 * double(cw_scale(n.e[a])));
+      e_min = std::min(e_min, int(n.e[a])), e_max = std::max(e_max, int(n.e[a]));
+    }
     out.nodes.resize(out.nodes.size() + interior);
     out.nodes[it.dst] = n;
     for (auto k = kids.rbegin(); k != kids.rend(); ++k) stack.push_back(*k);
   }
+  if (e_min <= e_max) out.e_min = e_min, out.e_max = e_max;
   for (int a = 0; a < 3; ++a) {  // rounded up to a float
     out.coord_bound[a] = float(bound[a]);
     if (double(out.coord_bound[a]) < bound[a]) out.coord_bound[a] = std::nextafter(out.coord_bound[a], INFINITY);

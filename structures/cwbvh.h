@@ -73,6 +73,10 @@ struct CWBVH {
   // grid can express), rounded up: the traversal's per-ray error bound of its fused plane
   // distances is proportional to it (traversal/cwbvh_traverse.h).
   float coord_bound[3] = {0, 0, 0};
+  // The least and the largest cell exponent e of any node and axis: the traversal forms
+  // A = 2^e * r by adding e to r's exponent field when every r_exp + e of a ray stays a normal
+  // float's exponent (traversal/cwbvh_traverse.h, CWRay::exp_add).
+  int e_min = 0, e_max = 0;
 
   // Re-lays out and quantizes an 8-wide MBVH with 8-wide blocks only (small_leaf = 0) and leaves
   // of at most 16 triangles; throws std::invalid_argument otherwise.

@@ -9,6 +9,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <random>
 
 #include "structures/builtin_scenes.h"
@@ -154,7 +155,7 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
   const FlushDenormals ftz;
   std::mt19937 rng(19);
   std::uniform_real_distribution<float> U(-1.f, 1.f), U01(0.f, 1.f);
-  uint64_t checked = 0, entered_exact = 0, unpadded_misses = 0;
+  uint64_t checked = 0, entered_exact = 0, unpadded_misses = 0, exp_add_rays = 0;
   for (float offset : {0.f, 1.f, 1e5f, -1e5f, 3e5f, 1e6f, -1e6f}) {
     for (float scale : {1e-3f, 1.f, 100.f}) {
       for (int k = 0; k < 400; ++k) {
@@ -167,11 +168,21 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
           Ray ray;
           ray.org = o, ray.dir = d, ray.tmin = tmin, ray.tmax = tfar;
           const RayCtx rc(ray);
-          const CWRay r(rc, tmin, t.bound);
+          const int e_min = std::min({int(t.n.e[0]), int(t.n.e[1]), int(t.n.e[2])});
+          const int e_max = std::max({int(t.n.e[0]), int(t.n.e[1]), int(t.n.e[2])});
+          const CWRay r(rc, tmin, t.bound, e_min, e_max);
           __m256 tn;
           const int mask = _mm256_movemask_ps(cw_box_test(t.n, r, _mm256_set1_ps(tfar), tn));
           alignas(32) float tns[8];
           _mm256_store_ps(tns, tn);
+          if (r.exp_add) {  // the exponent-add path: the same lanes and distances, bit for bit
+            __m256 tn_add;
+            ASSERT_EQ(_mm256_movemask_ps(cw_box_test<true>(t.n, r, _mm256_set1_ps(tfar), tn_add)), mask);
+            alignas(32) float adds[8];
+            _mm256_store_ps(adds, tn_add);
+            ASSERT_EQ(std::memcmp(adds, tns, sizeof adds), 0);
+            ++exp_add_rays;
+          }
           for (int i = 0; i < t.used; ++i) {
             long double t0, t1;
             ++checked;
@@ -190,6 +201,47 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
               (unsigned long long)checked, (unsigned long long)entered_exact, (unsigned long long)unpadded_misses);
   EXPECT_GT(entered_exact, checked / 20) << "the rays should enter a fair share of the children";
   EXPECT_GT(unpadded_misses, 0u) << "no ray tested the bound: the unpadded formula never culled an entered child";
+  EXPECT_GT(exp_add_rays, checked / 40) << "the exponent-add path should serve most rays";
+}
+
+// CWRay::exp_add admits a ray only where adding e * 2^23 to r's bits is the product 2^e r (what the
+// multiply path computes, FTZ included); rays with huge directions on fine grids take the multiply.
+TEST(CWBVH, ExponentAddEqualsTheProduct) {
+  const FlushDenormals ftz;
+  std::mt19937 rng(23);
+  uint64_t admitted = 0, refused = 0;
+  for (int k = 0; k < 20000; ++k) {
+    // Directions of every magnitude 2^-130 .. 2^130, signs and axes mixed.
+    const auto comp = [&] {
+      const float m = std::ldexp(1.f + float(rng() % 1000) / 1000.f, int(rng() % 261) - 130);
+      return rng() % 2 ? -m : m;
+    };
+    Ray ray;
+    ray.org = Vec3{1.f, -2.f, 3.f}, ray.dir = Vec3{comp(), comp(), comp()}, ray.tmin = 0, ray.tmax = INFINITY;
+    const RayCtx rc(ray);
+    const int e_min = int(rng() % 254) - 126, e_max = std::min(127, e_min + int(rng() % 40));  // cw_exponent's range
+    const float bound[3] = {1e3f, 1e3f, 1e3f};
+    const CWRay r(rc, 0.f, bound, e_min, e_max);
+    alignas(16) float rs[4];
+    _mm_store_ps(rs, r.r4);
+    bool exact = true;
+    for (int a = 0; a < 3; ++a) {
+      if (std::isnan(rs[a])) continue;
+      for (int e : {e_min, e_max, (e_min + e_max) / 2}) {
+        const float prod = cw_scale(int8_t(e)) * rs[a];
+        const float add = std::bit_cast<float>(std::bit_cast<uint32_t>(rs[a]) + (uint32_t(e) << 23));
+        exact = exact && std::bit_cast<uint32_t>(prod) == std::bit_cast<uint32_t>(add);
+      }
+    }
+    if (r.exp_add) {
+      ++admitted;
+      ASSERT_TRUE(exact) << "exp_add admitted a ray whose exponent sum leaves the normal range";
+    } else {
+      ++refused;
+    }
+  }
+  EXPECT_GT(admitted, 1000u);
+  EXPECT_GT(refused, 1000u);
 }
 
 MBVH<8, 8> mbvh8_of(const Scene& s) {

@@ -40,7 +40,7 @@ constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // compresses mbvh8_single's
 
 enum class CWOrder { branching, sort, octant };
 
-template <CWOrder O, class P>
+template <CWOrder O, bool ExpAdd, class P>
 void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, MBVHStackEntry* stack, P& probe) {
   using S = simd::V<8>;
   const CWNode* nodes = t.nodes.data();
@@ -52,7 +52,7 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
       const CWNode& nd = nodes[cur];
       probe.node(&nd, sizeof(nd));
       __m256 tn;
-      const __m256 entered = cw_box_test(nd, r, tfar8, tn);
+      const __m256 entered = cw_box_test<ExpAdd>(nd, r, tfar8, tn);
       const int mask = S::mask(entered);
       if constexpr (O == CWOrder::branching) {
         if (mask) {
@@ -122,13 +122,21 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       if (t.blocks.empty()) return;  // an empty scene: nothing to hit
       const RayCtx rc(ray);
-      const CWRay cr(rc, ray.tmin, t.coord_bound);
+      const CWRay cr(rc, ray.tmin, t.coord_bound, t.e_min, t.e_max);
+      const TriRay<8> tr(rc, ray.tmin);
+      const auto go = [&]<CWOrder O>() {
+        if (cr.exp_add) {
+          cw_traverse<O, true>(t, cr, tr, hit, stack.data(), probe);
+        } else {
+          cw_traverse<O, false>(t, cr, tr, hit, stack.data(), probe);
+        }
+      };
       if (order == CWOrder::branching) {
-        cw_traverse<CWOrder::branching>(t, cr, TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+        go.template operator()<CWOrder::branching>();
       } else if (order == CWOrder::sort) {
-        cw_traverse<CWOrder::sort>(t, cr, TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+        go.template operator()<CWOrder::sort>();
       } else {
-        cw_traverse<CWOrder::octant>(t, cr, TriRay<8>(rc, ray.tmin), hit, stack.data(), probe);
+        go.template operator()<CWOrder::octant>();
       }
     });
   }

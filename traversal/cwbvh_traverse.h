@@ -41,6 +41,7 @@
 #include <immintrin.h>
 
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -80,14 +81,21 @@ inline constexpr std::array<std::array<uint64_t, 256>, 8> kCWOctantOrder = [] {
 // for the three axes at once in SSE, in float: each of the four operations of E rounds by at most
 // u (E >= 7.99 u Z, where the bound needs 6.04 u Z + 4.02 u E), and c = fl(-o r -+ E) is one fused
 // rounding.
+// exp_add says whether A = fl(2^e r) may be formed by adding e to r's exponent field (cw_box_test's
+// ExpAdd): exact, as the product, when r is a normal float and r_exp + e is a normal exponent
+// (1..254) for every e of the tree (CWBVH::e_min..e_max) and every axis the test uses (an axis left
+// out has r = NaN and B = NaN, so its A is never read into a distance). A ray with |d| near 2^126
+// on a tree with very fine cells fails the check and takes the multiply, which flushes an
+// underflowing A to zero as the bound allows.
 struct CWRay {
   __m256 r8[3], cn8[3], cf8[3], tmin;
   __m128 r4;  // r of the three axes (lane 3 NaN): the node's three A = 2^e r in one multiply
   __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
   const uint32_t* rows;
   const uint64_t* order;  // kCWOctantOrder of the ray's octant
+  bool exp_add;
 
-  CWRay(const RayCtx& ray, float t0, const float coord_bound[3]) {
+  CWRay(const RayCtx& ray, float t0, const float coord_bound[3], int e_min, int e_max) {
     // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
     // E = 8 u (K + |o|) R + 2^-110 (1 + R).
     const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
@@ -95,6 +103,12 @@ struct CWRay {
     _mm_store_ps(rs, p.r), _mm_store_ps(ns, p.cn), _mm_store_ps(fs, p.cf);
     for (int a = 0; a < 3; ++a) r8[a] = _mm256_set1_ps(rs[a]), cn8[a] = _mm256_set1_ps(ns[a]), cf8[a] = _mm256_set1_ps(fs[a]);
     r4 = p.r;
+    exp_add = true;
+    for (int a = 0; a < 3; ++a) {
+      if (std::isnan(rs[a])) continue;
+      const int ex = int(std::bit_cast<uint32_t>(rs[a]) >> 23 & 0xFF);
+      exp_add = exp_add && ex >= 1 && ex + e_min >= 1 && ex + e_max <= 254;
+    }
     tmin = _mm256_set1_ps(t0);
     bias = _mm_set1_epi32(127);
     __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
@@ -113,19 +127,36 @@ struct CWRay {
 // The lanes (all-ones) whose child box the ray enters before tfar (broadcast), and the entry distances tn (a
 // lower bound of the exact entry: see the bound above). Operand order as kernels.h's slab: a NaN
 // plane distance (an axis left out) is skipped by max/min.
+// ExpAdd (only where the ray's exp_add holds) forms each axis' A = 2^e r as r's bits plus e * 2^23:
+// the node's first 16 bytes (p, e, imask) broadcast to both halves, one byte shuffle putting e_a
+// in the top byte of every lane, an arithmetic shift by 1 (e_a * 2^23, sign-extended) and an
+// integer add. The same value as the multiply (CWBVH.ExponentAddEqualsTheProduct), on a shorter
+// path from the node's bytes to its plane distances, which single-ray traversal waits on at every
+// node: crytek_sponza_partial 512x512, cwbvh_single +2 to +4% (docs/PERFORMANCE.md, session 17).
+template <bool ExpAdd = false>
 [[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, __m256 tfar, __m256& tn) {
-  // [2^e_x 2^e_y 2^e_z junk | p_x p_y p_z junk]: the cells from e[0..2] (imask's lane unused), the
-  // origin loaded with the e bytes as its fourth lane (junk, never read).
   static_assert(offsetof(CWNode, e) == offsetof(CWNode, p) + 12 && offsetof(CWNode, imask) == offsetof(CWNode, e) + 3);
-  int32_t e4;
-  std::memcpy(&e4, reinterpret_cast<const char*>(&nd) + offsetof(CWNode, e), sizeof e4);
-  const __m128 cells = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(_mm_cvtepi8_epi32(_mm_cvtsi32_si128(e4)), r.bias), 23));
-  // A = fl(2^e r) of the three axes in one 4-wide multiply, each copied to 8 lanes by an in-lane
-  // permute of [A | A] (the same values as three 8-wide multiplies of broadcasts, 3 instructions
-  // fewer per node).
-  const __m128 A4 = _mm_mul_ps(cells, r.r4);
-  const __m256 A44 = _mm256_set_m128(A4, A4);
-  const __m256 As[3] = {_mm256_permute_ps(A44, 0x00), _mm256_permute_ps(A44, 0x55), _mm256_permute_ps(A44, 0xAA)};
+  __m256 As[3];
+  if constexpr (ExpAdd) {
+    const __m256i head = _mm256_broadcastsi128_si256(_mm_load_si128(reinterpret_cast<const __m128i*>(&nd)));
+    for (int a = 0; a < 3; ++a) {
+      // Byte offsetof(CWNode, e) + a into the top byte of each lane, zeros below (0x80 selects 0).
+      const __m256i top = _mm256_set1_epi32(int(uint32_t(offsetof(CWNode, e) + size_t(a)) << 24 | 0x808080u));
+      const __m256i eb = _mm256_srai_epi32(_mm256_shuffle_epi8(head, top), 1);
+      As[a] = _mm256_castsi256_ps(_mm256_add_epi32(eb, _mm256_castps_si256(r.r8[a])));
+    }
+  } else {
+    // [2^e_x 2^e_y 2^e_z junk]: the cells from e[0..2] (imask's lane unused).
+    int32_t e4;
+    std::memcpy(&e4, reinterpret_cast<const char*>(&nd) + offsetof(CWNode, e), sizeof e4);
+    const __m128 cells = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(_mm_cvtepi8_epi32(_mm_cvtsi32_si128(e4)), r.bias), 23));
+    // A = fl(2^e r) of the three axes in one 4-wide multiply, each copied to 8 lanes by an in-lane
+    // permute of [A | A] (the same values as three 8-wide multiplies of broadcasts, 3 instructions
+    // fewer per node).
+    const __m128 A4 = _mm_mul_ps(cells, r.r4);
+    const __m256 A44 = _mm256_set_m128(A4, A4);
+    As[0] = _mm256_permute_ps(A44, 0x00), As[1] = _mm256_permute_ps(A44, 0x55), As[2] = _mm256_permute_ps(A44, 0xAA);
+  }
   __m256 n = r.tmin, f = tfar;
   for (int a = 0; a < 3; ++a) {
     // B = fl(p r + c) for the near and the far planes, from broadcasts: no store and reload on the
