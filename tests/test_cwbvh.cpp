@@ -223,7 +223,7 @@ TEST(CWBVH, ExponentAddEqualsTheProduct) {
     const float bound[3] = {1e3f, 1e3f, 1e3f};
     const CWRay r(rc, 0.f, bound, e_min, e_max);
     alignas(16) float rs[4];
-    _mm_store_ps(rs, r.r4);
+    _mm_store_ps(rs, _mm256_castps256_ps128(r.r44));
     bool exact = true;
     for (int a = 0; a < 3; ++a) {
       if (std::isnan(rs[a])) continue;

@@ -88,8 +88,9 @@ inline constexpr std::array<std::array<uint64_t, 256>, 8> kCWOctantOrder = [] {
 // on a tree with very fine cells fails the check and takes the multiply, which flushes an
 // underflowing A to zero as the bound allows.
 struct CWRay {
-  __m256 r8[3], cn8[3], cf8[3], tmin;
-  __m128 r4;  // r of the three axes (lane 3 NaN): the node's three A = 2^e r in one multiply
+  __m256 r44;  // [r | r] of the three axes (lanes 3 and 7 NaN)
+  __m256 c44;  // [c_near | c_far]: one fma gives a node's six B = fl(p r + c)
+  __m256 tmin;
   __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
   const uint32_t* rows;
   const uint64_t* order;  // kCWOctantOrder of the ray's octant
@@ -99,16 +100,15 @@ struct CWRay {
     // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
     // E = 8 u (K + |o|) R + 2^-110 (1 + R).
     const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
-    alignas(16) float rs[4], ns[4], fs[4];
-    _mm_store_ps(rs, p.r), _mm_store_ps(ns, p.cn), _mm_store_ps(fs, p.cf);
-    for (int a = 0; a < 3; ++a) r8[a] = _mm256_set1_ps(rs[a]), cn8[a] = _mm256_set1_ps(ns[a]), cf8[a] = _mm256_set1_ps(fs[a]);
-    r4 = p.r;
-    exp_add = true;
-    for (int a = 0; a < 3; ++a) {
-      if (std::isnan(rs[a])) continue;
-      const int ex = int(std::bit_cast<uint32_t>(rs[a]) >> 23 & 0xFF);
-      exp_add = exp_add && ex >= 1 && ex + e_min >= 1 && ex + e_max <= 254;
-    }
+    r44 = _mm256_set_m128(p.r, p.r);
+    c44 = _mm256_set_m128(p.cf, p.cn);
+    // exp_add: every used axis (r not NaN) has a normal r and r_exp + e in 1..254 for e_min..e_max.
+    const __m128i ex = _mm_and_si128(_mm_srli_epi32(_mm_castps_si128(p.r), 23), _mm_set1_epi32(0xFF));
+    const __m128i lo = _mm_add_epi32(ex, _mm_set1_epi32(std::min(e_min, 0)));  // also r_exp >= 1: r normal
+    const __m128i hi = _mm_add_epi32(ex, _mm_set1_epi32(e_max));
+    const __m128i bad = _mm_or_si128(_mm_cmplt_epi32(lo, _mm_set1_epi32(1)), _mm_cmpgt_epi32(hi, _mm_set1_epi32(254)));
+    const __m128 used = _mm_cmpord_ps(p.r, p.r);
+    exp_add = _mm_movemask_ps(_mm_and_ps(used, _mm_castsi128_ps(bad))) == 0;
     tmin = _mm256_set1_ps(t0);
     bias = _mm_set1_epi32(127);
     __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
@@ -133,38 +133,40 @@ struct CWRay {
 // integer add. The same value as the multiply (CWBVH.ExponentAddEqualsTheProduct), on a shorter
 // path from the node's bytes to its plane distances, which single-ray traversal waits on at every
 // node: crytek_sponza_partial 512x512, cwbvh_single +2 to +4% (docs/PERFORMANCE.md, session 17).
+// The six B = fl(p r + c) come from one 8-wide fma on [p | p] and [r | r], [c_near | c_far]
+// (session 17; before: three broadcasts of p and six fmas on per-axis broadcasts): the same values,
+// 4 ray constants in registers instead of 10 (AVX2 has 16), 8-11% fewer instructions (callgrind,
+// crytek and bunny, primary and bounce:2).
 template <bool ExpAdd = false>
 [[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, __m256 tfar, __m256& tn) {
-  static_assert(offsetof(CWNode, e) == offsetof(CWNode, p) + 12 && offsetof(CWNode, imask) == offsetof(CWNode, e) + 3);
-  __m256 As[3];
+  static_assert(offsetof(CWNode, p) == 0 && offsetof(CWNode, e) == 12 && offsetof(CWNode, imask) == 15);
+  // [p e | p e]: the node's first 16 bytes in both halves (lanes 3 and 7 hold e and imask: junk,
+  // never read into a distance).
+  const __m256 head = _mm256_broadcast_ps(reinterpret_cast<const __m128*>(&nd));
+  // [B_near | B_far] of the three axes, B = fl(p r + c), in one fma.
+  const __m256 B8 = _mm256_fmadd_ps(head, r.r44, r.c44);
+  __m256 A8;  // [A | A], A = 2^e r
   if constexpr (ExpAdd) {
-    const __m256i head = _mm256_broadcastsi128_si256(_mm_load_si128(reinterpret_cast<const __m128i*>(&nd)));
-    for (int a = 0; a < 3; ++a) {
-      // Byte offsetof(CWNode, e) + a into the top byte of each lane, zeros below (0x80 selects 0).
-      const __m256i top = _mm256_set1_epi32(int(uint32_t(offsetof(CWNode, e) + size_t(a)) << 24 | 0x808080u));
-      const __m256i eb = _mm256_srai_epi32(_mm256_shuffle_epi8(head, top), 1);
-      As[a] = _mm256_castsi256_ps(_mm256_add_epi32(eb, _mm256_castps_si256(r.r8[a])));
-    }
+    // e_a into the top byte of lane a (zeros below: 0x80 selects 0), shifted down to e_a * 2^23
+    // (sign-extended) and added to r's bits.
+    const __m256i top = _mm256_setr_epi32(0x0C808080, 0x0D808080, 0x0E808080, -1, 0x0C808080, 0x0D808080, 0x0E808080, -1);
+    const __m256i eb = _mm256_srai_epi32(_mm256_shuffle_epi8(_mm256_castps_si256(head), top), 1);
+    A8 = _mm256_castsi256_ps(_mm256_add_epi32(eb, _mm256_castps_si256(r.r44)));
   } else {
-    // [2^e_x 2^e_y 2^e_z junk]: the cells from e[0..2] (imask's lane unused).
+    // [2^e_x 2^e_y 2^e_z junk]: the cells from e[0..2] (imask's lane unused), one 4-wide multiply.
     int32_t e4;
     std::memcpy(&e4, reinterpret_cast<const char*>(&nd) + offsetof(CWNode, e), sizeof e4);
     const __m128 cells = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(_mm_cvtepi8_epi32(_mm_cvtsi32_si128(e4)), r.bias), 23));
-    // A = fl(2^e r) of the three axes in one 4-wide multiply, each copied to 8 lanes by an in-lane
-    // permute of [A | A] (the same values as three 8-wide multiplies of broadcasts, 3 instructions
-    // fewer per node).
-    const __m128 A4 = _mm_mul_ps(cells, r.r4);
-    const __m256 A44 = _mm256_set_m128(A4, A4);
-    As[0] = _mm256_permute_ps(A44, 0x00), As[1] = _mm256_permute_ps(A44, 0x55), As[2] = _mm256_permute_ps(A44, 0xAA);
+    const __m128 A4 = _mm_mul_ps(cells, _mm256_castps256_ps128(r.r44));
+    A8 = _mm256_set_m128(A4, A4);
   }
   __m256 n = r.tmin, f = tfar;
   for (int a = 0; a < 3; ++a) {
-    // B = fl(p r + c) for the near and the far planes, from broadcasts: no store and reload on the
-    // path from the node's bytes to the plane distances (single-ray traversal waits on it at every
-    // node), and the max/min chains are the slab test's.
-    const __m256 A = As[a], P = _mm256_broadcast_ss(&nd.p[a]);
-    n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, _mm256_fmadd_ps(P, r.r8[a], r.cn8[a])), n);
-    f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, _mm256_fmadd_ps(P, r.r8[a], r.cf8[a])), f);
+    // [B_near,a x4 | B_far,a x4] by an in-lane permute, then each half to both halves.
+    const __m256 A = _mm256_permute_ps(A8, 0x55 * a), Ba = _mm256_permute_ps(B8, 0x55 * a);
+    const __m256 Bn = _mm256_permute2f128_ps(Ba, Ba, 0x00), Bf = _mm256_permute2f128_ps(Ba, Ba, 0x11);
+    n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, Bn), n);
+    f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, Bf), f);
   }
   tn = n;
   return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
