@@ -18,8 +18,8 @@ std::string BVHBuildParams::key() const {
   std::snprintf(buf, sizeof buf, "bvh:bins=%d:leaf=%d:ct=%g:ci=%g", bins, max_leaf, cost_traversal, cost_intersect);  // threads do not change the tree
   std::string k = buf;
   if (spatial) {
-    std::snprintf(buf, sizeof buf, ":spatial:alpha=%g:budget=%g:wall=%g:overlap=%g", split_alpha, split_budget,
-                  split_wall, split_overlap);
+    std::snprintf(buf, sizeof buf, ":spatial:alpha=%g:budget=%g:wall=%g:overlap=%g:walls=%d", split_alpha, split_budget,
+                  split_wall, split_overlap, int(split_walls));
     k += buf;
   }
   return k;
@@ -359,6 +359,7 @@ BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
     sp.budget = p.split_budget;
     sp.wall = p.split_wall;
     sp.overlap = p.split_overlap;
+    sp.walls_apart = p.split_walls;
     return build_spatial_bvh(scene, p, sp);
   }
   const auto t0 = std::chrono::steady_clock::now();

@@ -39,13 +39,14 @@ struct BVHBuildParams {
   float cost_intersect = 1.f;
   int threads = 1;        // build threads (the tree is the same; node order may differ)
   // Spatial splits (structures/bvh_spatial.h): the scene build clips straddling triangles
-  // (references may repeat); split_alpha, split_budget, split_wall and split_overlap are
-  // SpatialSplitParams' alpha, budget, wall and overlap.
+  // (references may repeat); split_alpha, split_budget, split_wall, split_overlap and
+  // split_walls are SpatialSplitParams' alpha, budget, wall, overlap and walls_apart.
   bool spatial = false;
   float split_alpha = 1e-5f;
   float split_budget = 1.0f;
   float split_wall = 0.8f;
   float split_overlap = 0.f;  // SpatialSplitParams::overlap
+  bool split_walls = true;     // SpatialSplitParams::walls_apart
   std::string key() const;  // for the structure cache
 };
 

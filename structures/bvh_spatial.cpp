@@ -19,7 +19,7 @@ struct Bin {
 };
 
 struct Split {
-  enum Kind { none, object, spatial } kind = none;
+  enum Kind { none, object, spatial, walls } kind = none;  // walls: walls_apart's split
   int axis = -1;
   int pos = 0;  // object: first bin of the right side; spatial: plane index
   float cost = INFINITY;  // A_L * N_L + A_R * N_R
@@ -137,6 +137,7 @@ class SpatialBuilder {
       const Split s = spatial_split(refs, box);
       if (s.cost < best.cost) best = s;
     }
+    walls_apart(refs, best);
     const float parent_area = std::max(box.area(), 1e-30f);
     const float split_cost = p_.cost_traversal + p_.cost_intersect * best.cost / parent_area;
     const float leaf_cost = p_.cost_intersect * float(count);
@@ -154,6 +155,10 @@ class SpatialBuilder {
       left.clear();
       right.clear();
       best = object_split(refs);
+    }
+    if (best.kind == Split::walls) {
+      for (auto& r : refs) (is_wall(r) ? left : right).push_back(r);
+      return true;
     }
     if (best.kind == Split::object) {
       const int a = best.axis;
@@ -290,6 +295,22 @@ class SpatialBuilder {
     }
   }
   bool is_wall(const SpatialRef& r) const { return !wall_.empty() && wall_[r.prim]; }
+  // SpatialSplitParams::walls_apart: the split "the node's walls | the rest" as a candidate of
+  // the SAH beside the binned ones (which place a whole wall by its centroid, among its
+  // neighbours); replaces `best` where it costs less.
+  void walls_apart(const std::vector<SpatialRef>& refs, Split& best) const {
+    if (wall_.empty() || !sp_.walls_apart) return;
+    Split s;
+    uint32_t nw = 0, no = 0;
+    for (const auto& r : refs) {
+      if (is_wall(r)) s.left.grow(r.box), ++nw;
+      else s.right.grow(r.box), ++no;
+    }
+    if (nw == 0 || no == 0) return;
+    s.kind = Split::walls;
+    s.cost = s.left.area() * float(nw) + s.right.area() * float(no);
+    if (s.cost < best.cost) best = s;
+  }
 
   // Chopped binning (Stich et al. §4.1): a reference enters its first bin and exits its last;
   // in every bin it spans it adds the bounds of its part clipped to that bin.

@@ -48,6 +48,14 @@ struct SpatialSplitParams {
   // clipped (0) vs 1.36 at 0.8, stadium 0.92 vs 1.11; 0.8 keeps every other scene's gain from the
   // splits (sponza bounce:2 1.20 -> 1.22). 0 clips every triangle (Stich et al. as published).
   float wall = 0.8f;
+  // Whether the SAH also weighs, at every node holding walls and other references, the split
+  // "walls | the rest" (the walls to a child of their own). The binned splits place a whole wall
+  // by its centroid, among its neighbours, so every node on its path spans the enclosure and is
+  // entered by every ray that crosses it; set apart, the walls sit in one shallow subtree.
+  // Measured (session 17, docs/PERFORMANCE.md): node visits per ray -17 to -27% on
+  // crytek_sponza_partial, conference and stadium (-9% on the held-out-shaped scene), mbvh8_single
+  // +2 to +18% against embree_single; trees without walls are unchanged.
+  bool walls_apart = true;
   int spatial_bins = 16;  // spatial bins per axis (object splits use BVHBuildParams::bins)
   // Subtrees of fewer references are built by the plain binned builder (BVH::build over their
   // references): spatial splits deep in the tree gain little SAH (sponza: 0.823 of the plain

@@ -18,7 +18,10 @@ ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
           real_param("split_budget", 1.0, 0, 16, "spatial splits: at most this many extra references per triangle"),
           real_param("split_wall", d.split_wall, 0, 1,
                      "spatial splits: a triangle spanning this fraction of the scene's extent on two axes (a "
-                     "floor, ceiling or wall of the whole scene) is never clipped; 0: every triangle may be")};
+                     "floor, ceiling or wall of the whole scene) is never clipped; 0: every triangle may be"),
+          bool_param("split_walls", d.split_walls,
+                     "spatial splits: the SAH may also split a node into its walls (split_wall's triangles) and the "
+                     "rest, so a wall is not kept among its neighbours (0: binned splits only, as before session 17)")};
 }
 
 BVHBuildParams bvh_params(const SchemeConfig& cfg) {
@@ -30,6 +33,7 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   p.split_budget = float(cfg.get_real("split_budget"));
   p.split_wall = float(cfg.get_real("split_wall"));
   p.split_overlap = float(cfg.get_real("split_overlap"));
+  p.split_walls = cfg.get_bool("split_walls");
   return p;
 }
 
