@@ -112,14 +112,17 @@ struct Group {
   // lane's TriRay (tr_of) and RayCtx (rc_of) only when the per-lane block test, a scalar kernel
   // or the one-ray loop reads them. A scalar RayCtx and TriRay per lane cost ~200 instructions,
   // most of a primary ray on the held-out-shaped scene (callgrind).
-  void prepare_lane(uint32_t l) {
+  // Forced inline with tr_of: g++ 12 kept both out of line, a call per lane at every leaf
+  // (callgrind, held-out-shaped primary: 7% and 4% of the instructions); inlined, -1.5%
+  // instructions and +2 to +8% time against embree_packet8 (session 17, docs/PERFORMANCE.md).
+  [[gnu::always_inline]] void prepare_lane(uint32_t l) {
     if (ready >> l & 1) return;
     if (!ready) shear8();
     hit[l] = initial_hit(rays[l]);
     ready |= 1u << l;
   }
   // Lane l's block-test constants (the ray-parallel leaf test reads the group's instead).
-  const TriRay<8>& tr_of(uint32_t l) {
+  [[gnu::always_inline]] const TriRay<8>& tr_of(uint32_t l) {
     if (!(tr_ready >> l & 1)) {
       tr[l] = TriRay<8>(rays[l].org, rays[l].dir, kx[l], ky[l], kz[l], sx[l], sy[l], sz[l], rays[l].tmin);
       tr_ready |= 1u << l;
