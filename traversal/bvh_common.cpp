@@ -21,7 +21,7 @@ ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
                      "floor, ceiling or wall of the whole scene) is never clipped; 0: every triangle may be"),
           bool_param("split_walls", d.split_walls,
                      "spatial splits: the SAH may also split a node into its walls (split_wall's triangles) and the "
-                     "rest, so a wall is not kept among its neighbours (0: binned splits only, as before session 17)")};
+                     "rest, so a wall is not kept among its neighbours (0: the binned splits only)")};
 }
 
 BVHBuildParams bvh_params(const SchemeConfig& cfg) {
