@@ -132,7 +132,7 @@ struct CWRay {
 // in the top byte of every lane, an arithmetic shift by 1 (e_a * 2^23, sign-extended) and an
 // integer add. The same value as the multiply (CWBVH.ExponentAddEqualsTheProduct), on a shorter
 // path from the node's bytes to its plane distances, which single-ray traversal waits on at every
-// node: crytek_sponza_partial 512x512, cwbvh_single +2 to +4% (docs/PERFORMANCE.md, session 17).
+// node: cwbvh_single +1.3 to +2.9% (crytek_sponza_partial, sponza, conference; docs/PERFORMANCE.md, session 17).
 // The six B = fl(p r + c) come from one 8-wide fma on [p | p] and [r | r], [c_near | c_far]
 // (session 17; before: three broadcasts of p and six fmas on per-axis broadcasts): the same values,
 // 4 ray constants in registers instead of 10 (AVX2 has 16), 8-11% fewer instructions (callgrind,
