@@ -30,11 +30,13 @@
 // mbvh8_single, leaves up to `merge` (default 8) triangles in 4-wide blocks, tested two rays per
 // AVX2 pass). On bounce:3 width=8 ran 1.2-1.35x the 4-wide streams (conference, sponza,
 // crytek_sponza_partial, dragon_100k), mostly from visiting far fewer nodes per ray; it is the
-// default. All scratch lives in the call, so concurrent calls on disjoint ranges are safe.
+// default. A call holds its scratch alone (pooled across calls), so concurrent calls on disjoint
+// ranges are safe.
 #include "traversal/mbvh_fetch.h"
 #include "traversal/mbvh_traverse.h"
 #include "traversal/bvh_common.h"
 #include "traversal/mbvh_stream.h"
+#include "traversal/scratch_pool.h"
 
 namespace tb {
 namespace {
@@ -92,12 +94,13 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     // for the full stream (bunny bounce:3 with stream=65536 ran at a fourteenth of the speed).
     const uint32_t S = std::max<uint32_t>(
         1, std::min<uint32_t>(uint32_t(stream_), batch.packet_begin[range.last] - batch.packet_begin[range.first]));
-    Scratch s;
+    // Pooled: sized and faulted in by an earlier call, grown only (scratch_pool.h).
+    std::unique_ptr<Scratch> sp = pool_.acquire();
+    Scratch& s = *sp;
     s.mp = mbvh_stream::field_stride(S);
-    s.f.resize(kFields * s.mp);
-    s.node.resize(mbvh_stream::node_record_floats(S));
-    s.meta.resize(s.mp);
-    s.hits.resize(s.mp);
+    if (s.f.size() < kFields * s.mp) s.f.resize(kFields * s.mp);
+    if (s.node.size() < mbvh_stream::node_record_floats(S)) s.node.resize(mbvh_stream::node_record_floats(S));
+    if (s.meta.size() < s.mp) s.meta.resize(s.mp), s.hits.resize(s.mp);
     s.st.reserve(N, d.mbvh->stats.max_depth + 1, S);
 
     uint32_t begin = batch.packet_begin[range.first], end = begin;
@@ -114,6 +117,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
       end = pend;
     }
     if (end > begin) trace_stream<N, K>(d, batch, begin, end, hits, s, probe);
+    pool_.release(std::move(sp));
   }
 
   // Algorithm 2.9 on rays [first, last) of the batch.
@@ -150,6 +154,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 
   int stream_;
   mbvh_stream::Order order_;
+  ScratchPool<Scratch> pool_;  // one record per concurrent call
 };
 
 }  // namespace

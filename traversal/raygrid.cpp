@@ -51,11 +51,11 @@
 #include <atomic>
 #include <bit>
 #include <cstring>
-#include <mutex>
 
 #include "structures/octree.h"
 #include "traversal/mbvh_stream.h"
 #include "traversal/raygrid_stats.h"
+#include "traversal/scratch_pool.h"
 
 namespace tb {
 
@@ -175,7 +175,6 @@ class RayGrid final : public TraverserBase<RayGrid> {
       });
     }
     depth_ = (params_.width == 8 ? oct_->mini8.stats.max_depth : oct_->mini.stats.max_depth) + 1;
-    std::lock_guard lock(pool_mutex_);
     pool_.clear();
   }
   std::string structure_info() const override {
@@ -217,21 +216,6 @@ class RayGrid final : public TraverserBase<RayGrid> {
   const Octree* octree() const { return oct_.get(); }
 
  private:
-  // ------------------------------------------------------------------------------------------
-  // Scratch pool
-
-  std::unique_ptr<Scratch> acquire() const {
-    std::lock_guard lock(pool_mutex_);
-    if (pool_.empty()) return std::make_unique<Scratch>();
-    auto s = std::move(pool_.back());
-    pool_.pop_back();
-    return s;
-  }
-  void release(std::unique_ptr<Scratch> s) const {
-    std::lock_guard lock(pool_mutex_);
-    pool_.push_back(std::move(s));
-  }
-
   // ------------------------------------------------------------------------------------------
   // Queues (§5.3.2 "Ray Queues")
 
@@ -426,13 +410,13 @@ class RayGrid final : public TraverserBase<RayGrid> {
   void run_kernel(const RayBatch& batch, PacketRange range, std::span<Hit> out, P& probe) const {
     const uint32_t begin = batch.packet_begin[range.first], end = batch.packet_begin[range.last];
     if (begin >= end) return;
-    std::unique_ptr<Scratch> sp = acquire();
+    std::unique_ptr<Scratch> sp = pool_.acquire();
     Scratch& s = *sp;
     Counters c;
     for (uint32_t first = begin; first < end; first += kMaxChunk)
       if (params_.width == 8) run_chunk<8, K>(s, batch, first, std::min(end, first + kMaxChunk), out, c, probe);
       else run_chunk<4, K>(s, batch, first, std::min(end, first + kMaxChunk), out, c, probe);
-    release(std::move(sp));
+    pool_.release(std::move(sp));
     calls_ += 1, rays_ += c.rays, outside_ += c.outside, queues_ += c.queues, full_ += c.full, partial_ += c.partial;
     queued_rays_ += c.queued_rays, skipped_ += c.skipped, fallbacks_ += c.fallbacks;
     for (uint64_t p = peak_queues_.load(); c.peak_queues > p && !peak_queues_.compare_exchange_weak(p, c.peak_queues);) {
@@ -621,8 +605,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
   uint32_t depth_ = 1;
   std::shared_ptr<const Octree> oct_;
   std::shared_ptr<const TriangleSet> tris_;
-  mutable std::mutex pool_mutex_;
-  mutable std::vector<std::unique_ptr<Scratch>> pool_;
+  ScratchPool<Scratch> pool_;  // one record per concurrent call
   mutable std::atomic<uint64_t> calls_{0}, rays_{0}, outside_{0}, queues_{0}, full_{0}, partial_{0}, queued_rays_{0},
       skipped_{0}, fallbacks_{0}, peak_queues_{0};
 };
