@@ -140,7 +140,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
       f[kTmin * mp + j] = ray.tmin;
       if constexpr (P::enabled) {
         for (uint32_t k = 0; k < kFields; ++k) probe.write(&f[k * mp + j], 4);
-        for (uint32_t k = 0; k <= mbvh_stream::kNOct; ++k) probe.write(mbvh_stream::node_fields(s.node.data(), j) + 8 * k, 4);
+        probe.write(mbvh_stream::node_fields(s.node.data(), j), (mbvh_stream::kNOct + 1) * sizeof(float));
       }
       s.hits[j] = initial_hit(ray);
     }

@@ -52,21 +52,15 @@ inline ParamSpec order_param() {
 }
 inline Order order_of(const SchemeConfig& cfg) { return cfg.get_choice("task_order") == "sum" ? Order::sum : Order::mean; }
 
-// The node test's record of a stream (NodeRay's constants), AoSoA: rays in groups of eight, each
-// group kNodeFields rows of eight floats: the fused-plane constants r, c_near, c_far per axis
-// (kernels.h, FusedPlanes), tmin, and the octant (bits 0-2, as a float's bit pattern). One ray's
-// constants sit at one pointer with constant offsets, so the per-ray loop of the node test (the
-// stream's innermost loop) reads them with broadcasts off one register. With SoA arrays it
-// reloaded a spilled base pointer before each of its ten broadcasts (13 of its 62 instructions,
-// callgrind, sibenik_lucy bounce:3), and a lone ray deep in the tree touched ten lines instead of
-// six.
-enum NodeField : uint32_t { kNR = 0, kNCN = 3, kNCF = 6, kNTmin = 9, kNOct = 10, kNodeFields = 12 };
+// The node test's record of a stream (NodeRay's constants), one 64-byte line per ray: the
+// fused-plane constants r, c_near, c_far per axis (kernels.h, FusedPlanes), tmin, and the octant
+// (bits 0-2, as a float's bit pattern). A task's rays are a sparse subset of the stream below the
+// first levels, so what one ray's test touches is what counts: one line here.
+enum NodeField : uint32_t { kNR = 0, kNCN = 3, kNCF = 6, kNTmin = 9, kNOct = 10, kNodeFields = 16 };
 // Floats of the node record of n rays (n rounded up to 8).
 inline size_t node_record_floats(size_t n) { return ((n + 7) / 8) * 8 * kNodeFields; }
-// Ray id's constants: field k is at [8 * k].
-inline const float* node_fields(const float* node, uint32_t id) {
-  return node + size_t(id >> 3) * (8 * kNodeFields) + (id & 7u);
-}
+// Ray id's constants: field k is at [k].
+inline const float* node_fields(const float* node, uint32_t id) { return node + size_t(id) * kNodeFields; }
 
 // The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
 // caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest:
@@ -105,16 +99,16 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
     const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
     const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
     if (v.ix) _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
-    float* nd = v.node + size_t(k) * kNodeFields;  // this group of eight's node record
+    alignas(32) float nd[kNodeFields][8];  // this group of eight's node fields, transposed below
     {
       const float* o[3] = {v.ox, v.oy, v.oz};
       const __m256 in[3] = {ix, iy, iz};
       for (int a = 0; a < 3; ++a) {
         const FusedPlanes<8> p = fused_planes<8>(_mm256_load_ps(o[a] + k), in[a], _mm256_set1_ps(bound[a]));
-        _mm256_store_ps(nd + 8 * (kNR + a), p.r), _mm256_store_ps(nd + 8 * (kNCN + a), p.cn);
-        _mm256_store_ps(nd + 8 * (kNCF + a), p.cf);
+        _mm256_store_ps(nd[kNR + a], p.r), _mm256_store_ps(nd[kNCN + a], p.cn);
+        _mm256_store_ps(nd[kNCF + a], p.cf);
       }
-      _mm256_store_ps(nd + 8 * kNTmin, _mm256_load_ps(v.tmin + k));
+      _mm256_store_ps(nd[kNTmin], _mm256_load_ps(v.tmin + k));
     }
     // kz = the dominant axis: a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2).
     const __m256 ax = _mm256_and_ps(dx, absmask), ay = _mm256_and_ps(dy, absmask), az = _mm256_and_ps(dz, absmask);
@@ -144,7 +138,9 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
       const uint32_t perm = kPerm[m0 >> j & 1][m1 >> j & 1][ms >> j & 1];
       const uint32_t oct = uint32_t(sx >> j & 1) | uint32_t(sy >> j & 1) << 1 | uint32_t(sz >> j & 1) << 2;
       v.meta[k + j] = oct | perm << 4;
-      std::memcpy(nd + 8 * kNOct + j, &oct, sizeof oct);
+      std::memcpy(&nd[kNOct][j], &oct, sizeof oct);
+      float* rec = v.node + size_t(k + j) * kNodeFields;
+      for (uint32_t f = 0; f <= kNOct; ++f) rec[f] = nd[f][j];
     }
   }
 }
@@ -254,7 +250,7 @@ template <class P>
 inline void probe_ray(const Rays& v, uint32_t id, P& probe) {
   if constexpr (P::enabled) {
     const float* nf = node_fields(v.node, id);
-    for (uint32_t k = 0; k <= kNOct; ++k) probe.read(nf + 8 * k, 4);
+    probe.read(nf, (kNOct + 1) * sizeof(float));
     probe.read(&v.hits[id], 4);
   }
 }
@@ -328,10 +324,9 @@ template <int N>
 [[gnu::always_inline]] inline NodeRay<N> node_ray(const Rays& v, uint32_t id) {
   const float* f = node_fields(v.node, id);
   uint32_t oct;
-  std::memcpy(&oct, f + 8 * kNOct, sizeof oct);
-  return NodeRay<N>(Vec3{f[8 * kNR], f[8 * (kNR + 1)], f[8 * (kNR + 2)]},
-                    Vec3{f[8 * kNCN], f[8 * (kNCN + 1)], f[8 * (kNCN + 2)]},
-                    Vec3{f[8 * kNCF], f[8 * (kNCF + 1)], f[8 * (kNCF + 2)]}, f[8 * kNTmin], oct);
+  std::memcpy(&oct, f + kNOct, sizeof oct);
+  return NodeRay<N>(Vec3{f[kNR], f[kNR + 1], f[kNR + 2]}, Vec3{f[kNCN], f[kNCN + 1], f[kNCN + 2]},
+                    Vec3{f[kNCF], f[kNCF + 1], f[kNCF + 2]}, f[kNTmin], oct);
 }
 
 // Ordinary single-ray traversal of the subtree `ref` for ray `id` (streams of one).
