@@ -13,7 +13,7 @@
 //
 // Streams are consecutive packets of the batch, grouped up to `stream` rays (parameter); a packet
 // larger than that is cut. A stream's rays are copied into SoA arrays and their per-ray constants
-// computed eight rays per AVX2 instruction (mbvh_stream::prepare).
+// computed eight rays per AVX2 instruction into a 128-byte record per ray (mbvh_stream::prepare).
 //
 // The default stream is 8192 rays, not the thesis' 256 (Tsakok and the thesis found 256-1024
 // best on their machines, §5.2.4; the thesis tables still run 256, harness/tables.cpp):
@@ -21,8 +21,8 @@
 // rays per node is what limits the scheme), and today's L2 holds it. Measured on bounce:3 at
 // 512x512, 2 interleaved rounds, mbvh_rs / mbvh8_single with stream = 256 / 2048 / 8192 / 65536:
 // conference 1.29 / 1.39 / 1.46 / 1.17, sponza 1.00 / 1.23 / 1.32 / 0.99, sibenik 0.92 / 1.18 /
-// 1.33 / 0.99 (docs/PERFORMANCE.md, "Session 12"). Past the knee the stream's records (96 bytes a
-// ray) leave L2: the simulated cache on sponza puts it between 8192 and 16384 rays for a 512 KB
+// 1.33 / 0.99 (docs/PERFORMANCE.md, "Session 12"). Past the knee the stream's records (then 96 bytes a
+// ray; 156 since session 18's records) leave L2: the simulated cache on sponza puts it between 8192 and 16384 rays for a 512 KB
 // L2 (Zen 3: 7.9 vs 34 L3 hits per ray) and between 16384 and 65536 for this VM's 2 MB.
 //
 // `width`: 4 = the thesis' SSE layout (MBVH<4,4>, greedy collapse, leaves merged up to 4
@@ -74,15 +74,13 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   }
 
  private:
-  // The stream's SoA record: the ray fields, the derived constants, the hits.
-  // (No reciprocal-direction field: the node test reads the fused-plane constants of `node`.)
-  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kSX, kSY, kSZ, kPX, kPY, kPZ, kFields };
+  // The stream's rays: SoA fields (prepare's input, eight rays per load) and the per-ray records
+  // the traversal reads (mbvh_stream::RayRecord, with the hits).
+  enum Field : uint32_t { kOX, kOY, kOZ, kDX, kDY, kDZ, kTmin, kFields };
   struct Scratch {
     size_t mp = 0;  // the field arrays' stride (mbvh_stream::field_stride)
     aligned_vector<float> f;
-    aligned_vector<float> node;  // the node test's record (mbvh_stream::node_fields)
-    aligned_vector<uint32_t> meta;
-    std::vector<Hit> hits;
+    aligned_vector<mbvh_stream::RayRecord> rec;
     mbvh_stream::Scratch st;
   };
 
@@ -99,8 +97,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     Scratch& s = *sp;
     s.mp = mbvh_stream::field_stride(S);
     if (s.f.size() < kFields * s.mp) s.f.resize(kFields * s.mp);
-    if (s.node.size() < mbvh_stream::node_record_floats(S)) s.node.resize(mbvh_stream::node_record_floats(S));
-    if (s.meta.size() < s.mp) s.meta.resize(s.mp), s.hits.resize(s.mp);
+    if (s.rec.size() < (S + 7) / 8 * 8) s.rec.resize((S + 7) / 8 * 8);
     s.st.reserve(N, d.mbvh->stats.max_depth + 1, S);
 
     uint32_t begin = batch.packet_begin[range.first], end = begin;
@@ -130,8 +127,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     float* f = s.f.data();
     const size_t mp = s.mp;
     const mbvh_stream::Rays v{f + kOX * mp, f + kOY * mp, f + kOZ * mp, f + kDX * mp, f + kDY * mp, f + kDZ * mp,
-                              f + kTmin * mp, nullptr, nullptr, nullptr, s.node.data(), f + kSX * mp, f + kSY * mp,
-                              f + kSZ * mp, f + kPX * mp, f + kPY * mp, f + kPZ * mp, s.meta.data(), s.hits.data()};
+                              f + kTmin * mp, nullptr, nullptr, nullptr, s.rec.data()};
     for (uint32_t j = 0; j < n; ++j) {
       const Ray& ray = batch.rays[first + j];
       probe.read(&ray, sizeof(Ray));
@@ -140,14 +136,14 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
       f[kTmin * mp + j] = ray.tmin;
       if constexpr (P::enabled) {
         for (uint32_t k = 0; k < kFields; ++k) probe.write(&f[k * mp + j], 4);
-        probe.write(mbvh_stream::node_fields(s.node.data(), j), (mbvh_stream::kNOct + 1) * sizeof(float));
+        probe.write(&s.rec[j], sizeof(mbvh_stream::RayRecord));
       }
-      s.hits[j] = initial_hit(ray);
+      s.rec[j].hit = initial_hit(ray);
     }
     mbvh_stream::prepare(v, n, d.mbvh->coord_bound);
     mbvh_stream::trace<N, K>(*d.mbvh, d.tris.get(), s.st, v, n, 0, order_, probe);
     for (uint32_t j = 0; j < n; ++j) {
-      out[first + j] = finish_hit(s.hits[j]);
+      out[first + j] = finish_hit(s.rec[j].hit);
       probe.write(&out[first + j], sizeof(Hit));
     }
   }

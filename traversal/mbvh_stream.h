@@ -3,7 +3,8 @@
 // octree-leaf queue over that leaf's mini-MBVH, thesis §5.3). One kernel, templated on the node
 // width N (4: the thesis' SSE layout; 8: AVX2 nodes, MBVHNode<8>), on 4-wide triangle blocks.
 //
-// A stream is a set of rays in SoA form (`Rays`). Traversal: a task is (node, lane, count); its
+// A stream is a set of rays (`Rays`: SoA input, computed eight at a time into one two-line
+// record per ray, `RayRecord`). Traversal: a task is (node, lane, count); its
 // rays are the `count` ids on top of lane `lane`'s active-ray stack. Every ray of the task is
 // tested against the node's N child boxes (one N-wide slab test per ray), and every ray that
 // enters child c is pushed onto lane c's stack, so a child's stream holds only the rays that enter
@@ -27,6 +28,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <vector>
@@ -52,30 +54,42 @@ inline ParamSpec order_param() {
 }
 inline Order order_of(const SchemeConfig& cfg) { return cfg.get_choice("task_order") == "sum" ? Order::sum : Order::mean; }
 
-// The node test's record of a stream (NodeRay's constants), one 64-byte line per ray: the
-// fused-plane constants r, c_near, c_far per axis (kernels.h, FusedPlanes), tmin, and the octant
-// (bits 0-2, as a float's bit pattern). A task's rays are a sparse subset of the stream below the
-// first levels, so what one ray's test touches is what counts: one line here.
-enum NodeField : uint32_t { kNR = 0, kNCN = 3, kNCF = 6, kNTmin = 9, kNOct = 10, kNodeFields = 16 };
-// Floats of the node record of n rays (n rounded up to 8).
-inline size_t node_record_floats(size_t n) { return ((n + 7) / 8) * 8 * kNodeFields; }
-// Ray id's constants: field k is at [k].
-inline const float* node_fields(const float* node, uint32_t id) { return node + size_t(id) * kNodeFields; }
+// One ray's record in the stream, two 64-byte lines. A task's rays are a sparse subset of the
+// stream below the first levels of the tree, so what one ray's test touches is what counts:
+// - line 0, read by every node test: the fused-plane constants r, c_near, c_far per axis
+//   (kernels.h, FusedPlanes), tmin, the octant (bits 0-2, as a float's bit pattern), and the
+//   closest hit so far (its t is the test's far limit);
+// - line 1, read by leaf tests: the watertight test's origin permuted to (kx, ky, kz) and shear,
+//   the ray itself (the double plane distance of candidates), and `meta`: the sign octant
+//   (bits 0-2: reciprocal negative on x, y, z) and the axis permutation kx, ky, kz (bits 4-5,
+//   6-7, 8-9).
+// With the node constants in AoSoA groups of eight (six lines a ray) and the hits and the leaf
+// constants in SoA arrays, a ray's node test touched seven lines and its leaf test fourteen
+// (docs/PERFORMANCE.md, "Session 18").
+enum NodeField : uint32_t { kNR = 0, kNCN = 3, kNCF = 6, kNTmin = 9, kNOct = 10, kNodeFields = 12 };
+enum LeafField : uint32_t { kLP = 0, kLS = 3, kLO = 6, kLD = 9, kLMeta = 12, kLeafFields = 16 };
+struct alignas(64) RayRecord {
+  float node[kNodeFields];
+  Hit hit;
+  float leaf[kLeafFields];
+  uint32_t meta() const {
+    uint32_t m;
+    std::memcpy(&m, &leaf[kLMeta], sizeof m);
+    return m;
+  }
+  Vec3 org() const { return {leaf[kLO], leaf[kLO + 1], leaf[kLO + 2]}; }
+  Vec3 dir() const { return {leaf[kLD], leaf[kLD + 1], leaf[kLD + 2]}; }
+};
+static_assert(sizeof(RayRecord) == 128 && offsetof(RayRecord, hit) == 48);
 
-// The stream's rays, SoA, every array 32-byte aligned with room for n rounded up to 8. The
-// caller fills ox..tmin and hits (t = the search limit, prim = kNoHit); prepare() fills the rest:
-// ix.. the reciprocal direction (RayGrid's octree walk; null when no one reads it: mbvh_rs),
-// `node` the node test's record (above, node_record_floats(n) floats), sx.. and px.. the
-// watertight test's. `meta` packs the direction's sign octant (bits 0-2: reciprocal negative on
-// x, y, z) and the watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
+// The stream's rays. The caller fills ox..tmin (SoA, every array 32-byte aligned with room for n
+// rounded up to 8) and each record's hit (t = the search limit, prim = kNoHit); prepare() fills
+// the rest of the records (n rounded up to 8 of them) and ix.. the reciprocal direction
+// (RayGrid's octree walk; null when no one reads it: mbvh_rs).
 struct Rays {
   const float *ox, *oy, *oz, *dx, *dy, *dz, *tmin;
   float *ix, *iy, *iz;
-  float* node;
-  float *sx, *sy, *sz;
-  float *px, *py, *pz;  // the origin permuted to (kx, ky, kz) for the watertight test
-  uint32_t* meta;
-  Hit* hits;
+  RayRecord* rec;  // n records
 };
 
 // The distance, in floats, between two field arrays of a SoA ray record of n rays: n rounded up
@@ -85,30 +99,56 @@ struct Rays {
 // L1 on sponza bounce:3: 164 L2 hits per ray).
 inline size_t field_stride(size_t n) { return ((n + 7) & ~size_t(7)) + 16; }
 
+// Transposes eight rows of eight floats: afterwards r[j] holds what was column j (one ray's
+// eight fields, from eight fields of eight rays).
+[[gnu::always_inline]] inline void transpose8(__m256 r[8]) {
+  const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+  const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+  const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+  const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+  const __m256 s0 = _mm256_shuffle_ps(t0, t2, 0x44), s1 = _mm256_shuffle_ps(t0, t2, 0xEE);
+  const __m256 s2 = _mm256_shuffle_ps(t1, t3, 0x44), s3 = _mm256_shuffle_ps(t1, t3, 0xEE);
+  const __m256 s4 = _mm256_shuffle_ps(t4, t6, 0x44), s5 = _mm256_shuffle_ps(t4, t6, 0xEE);
+  const __m256 s6 = _mm256_shuffle_ps(t5, t7, 0x44), s7 = _mm256_shuffle_ps(t5, t7, 0xEE);
+  r[0] = _mm256_permute2f128_ps(s0, s4, 0x20), r[1] = _mm256_permute2f128_ps(s1, s5, 0x20);
+  r[2] = _mm256_permute2f128_ps(s2, s6, 0x20), r[3] = _mm256_permute2f128_ps(s3, s7, 0x20);
+  r[4] = _mm256_permute2f128_ps(s0, s4, 0x31), r[5] = _mm256_permute2f128_ps(s1, s5, 0x31);
+  r[6] = _mm256_permute2f128_ps(s2, s6, 0x31), r[7] = _mm256_permute2f128_ps(s3, s7, 0x31);
+}
+
 // RayCtx's constants for rays [0, n), eight at a time with the same float operations (1/d,
 // d[kx]/d[kz], ...), so the watertight test sees exactly RayCtx's values, and NodeRay's for the
-// tree's coordinate bound (MBVH::coord_bound). Reads and writes up to the next multiple of 8.
+// tree's coordinate bound (MBVH::coord_bound). Reads the SoA fields and writes ix.. and the
+// records (all but their hits) up to the next multiple of 8.
 inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
   const __m256 one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
   const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-  // (kz == 0, kz == 1, swap) -> kx | ky << 2 | kz << 4, as RayCtx chooses them.
-  static constexpr uint32_t kPerm[2][2][2] = {
-      {{0u | 1u << 2 | 2u << 4, 1u | 0u << 2 | 2u << 4}, {2u | 0u << 2 | 1u << 4, 0u | 2u << 2 | 1u << 4}},
-      {{1u | 2u << 2 | 0u << 4, 2u | 1u << 2 | 0u << 4}, {1u | 2u << 2 | 0u << 4, 2u | 1u << 2 | 0u << 4}}};
+  // (kz == 0, kz == 1, swap) -> kx | ky << 2 | kz << 4, as RayCtx chooses them, shifted to meta's
+  // bits 4-9, indexed by kz == 0 | (kz == 1) << 1 | swap << 2.
+  const __m256i perms = _mm256_slli_epi32(
+      _mm256_setr_epi32(0 | 1 << 2 | 2 << 4, 1 | 2 << 2 | 0 << 4, 2 | 0 << 2 | 1 << 4, 0, 1 | 0 << 2 | 2 << 4,
+                        2 | 1 << 2 | 0 << 4, 0 | 2 << 2 | 1 << 4, 0),
+      4);
   for (uint32_t k = 0; k < n; k += 8) {
     const __m256 dx = _mm256_load_ps(v.dx + k), dy = _mm256_load_ps(v.dy + k), dz = _mm256_load_ps(v.dz + k);
+    const __m256 ox = _mm256_load_ps(v.ox + k), oy = _mm256_load_ps(v.oy + k), oz = _mm256_load_ps(v.oz + k);
     const __m256 ix = _mm256_div_ps(one, dx), iy = _mm256_div_ps(one, dy), iz = _mm256_div_ps(one, dz);
     if (v.ix) _mm256_store_ps(v.ix + k, ix), _mm256_store_ps(v.iy + k, iy), _mm256_store_ps(v.iz + k, iz);
-    alignas(32) float nd[kNodeFields][8];  // this group of eight's node fields, transposed below
+    // The octant: the reciprocal's sign bits.
+    const __m256i oct = _mm256_or_si256(
+        _mm256_srli_epi32(_mm256_castps_si256(ix), 31),
+        _mm256_or_si256(_mm256_slli_epi32(_mm256_srli_epi32(_mm256_castps_si256(iy), 31), 1),
+                        _mm256_slli_epi32(_mm256_srli_epi32(_mm256_castps_si256(iz), 31), 2)));
+    __m256 nd[16];  // this group's node fields (rows), transposed below; 11-15 unused
     {
-      const float* o[3] = {v.ox, v.oy, v.oz};
-      const __m256 in[3] = {ix, iy, iz};
+      const __m256 o[3] = {ox, oy, oz}, in[3] = {ix, iy, iz};
       for (int a = 0; a < 3; ++a) {
-        const FusedPlanes<8> p = fused_planes<8>(_mm256_load_ps(o[a] + k), in[a], _mm256_set1_ps(bound[a]));
-        _mm256_store_ps(nd[kNR + a], p.r), _mm256_store_ps(nd[kNCN + a], p.cn);
-        _mm256_store_ps(nd[kNCF + a], p.cf);
+        const FusedPlanes<8> p = fused_planes<8>(o[a], in[a], _mm256_set1_ps(bound[a]));
+        nd[kNR + a] = p.r, nd[kNCN + a] = p.cn, nd[kNCF + a] = p.cf;
       }
-      _mm256_store_ps(nd[kNTmin], _mm256_load_ps(v.tmin + k));
+      nd[kNTmin] = _mm256_load_ps(v.tmin + k);
+      nd[kNOct] = _mm256_castsi256_ps(oct);
+      for (int f = kNOct + 1; f < 16; ++f) nd[f] = zero;
     }
     // kz = the dominant axis: a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2).
     const __m256 ax = _mm256_and_ps(dx, absmask), ay = _mm256_and_ps(dy, absmask), az = _mm256_and_ps(dz, absmask);
@@ -120,27 +160,33 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
     const __m256 dkx = _mm256_blendv_ps(_mm256_blendv_ps(dx, dz, k1), dy, k0);
     const __m256 dky = _mm256_blendv_ps(_mm256_blendv_ps(dy, dx, k1), dz, k0);
     const __m256 swap = _mm256_cmp_ps(dkz, zero, _CMP_LT_OQ);
+    __m256 lf[16];  // this group's leaf fields (rows), transposed below; 13-15 unused
     {  // the origin in the same permutation (TriRay's ox, oy, oz)
-      const __m256 ox = _mm256_load_ps(v.ox + k), oy = _mm256_load_ps(v.oy + k), oz = _mm256_load_ps(v.oz + k);
       const __m256 okz = _mm256_blendv_ps(_mm256_blendv_ps(oz, oy, k1), ox, k0);
       const __m256 okx = _mm256_blendv_ps(_mm256_blendv_ps(ox, oz, k1), oy, k0);
       const __m256 oky = _mm256_blendv_ps(_mm256_blendv_ps(oy, ox, k1), oz, k0);
-      _mm256_store_ps(v.px + k, _mm256_blendv_ps(okx, oky, swap));
-      _mm256_store_ps(v.py + k, _mm256_blendv_ps(oky, okx, swap));
-      _mm256_store_ps(v.pz + k, okz);
+      lf[kLP] = _mm256_blendv_ps(okx, oky, swap), lf[kLP + 1] = _mm256_blendv_ps(oky, okx, swap), lf[kLP + 2] = okz;
     }
-    _mm256_store_ps(v.sx + k, _mm256_div_ps(_mm256_blendv_ps(dkx, dky, swap), dkz));
-    _mm256_store_ps(v.sy + k, _mm256_div_ps(_mm256_blendv_ps(dky, dkx, swap), dkz));
-    _mm256_store_ps(v.sz + k, _mm256_div_ps(one, dkz));
-    const int m0 = _mm256_movemask_ps(k0), m1 = _mm256_movemask_ps(k1), ms = _mm256_movemask_ps(swap);
-    const int sx = _mm256_movemask_ps(ix), sy = _mm256_movemask_ps(iy), sz = _mm256_movemask_ps(iz);
+    lf[kLS] = _mm256_div_ps(_mm256_blendv_ps(dkx, dky, swap), dkz);
+    lf[kLS + 1] = _mm256_div_ps(_mm256_blendv_ps(dky, dkx, swap), dkz);
+    lf[kLS + 2] = _mm256_div_ps(one, dkz);
+    lf[kLO] = ox, lf[kLO + 1] = oy, lf[kLO + 2] = oz, lf[kLD] = dx, lf[kLD + 1] = dy, lf[kLD + 2] = dz;
+    {  // meta = oct | perm << 4 (the all-ones compare masks shifted down to 0/1)
+      const __m256i sel = _mm256_or_si256(
+          _mm256_srli_epi32(_mm256_castps_si256(k0), 31),
+          _mm256_or_si256(_mm256_slli_epi32(_mm256_srli_epi32(_mm256_castps_si256(k1), 31), 1),
+                          _mm256_slli_epi32(_mm256_srli_epi32(_mm256_castps_si256(swap), 31), 2)));
+      lf[kLMeta] = _mm256_castsi256_ps(_mm256_or_si256(oct, _mm256_permutevar8x32_epi32(perms, sel)));
+    }
+    for (int f = kLMeta + 1; f < 16; ++f) lf[f] = zero;
+    // Rows to records: node fields 0-7 and 8-11 (the hit, 12-15, is the caller's), leaf fields
+    // 0-7 and 8-15.
+    transpose8(nd), transpose8(nd + 8), transpose8(lf), transpose8(lf + 8);
     for (int j = 0; j < 8; ++j) {
-      const uint32_t perm = kPerm[m0 >> j & 1][m1 >> j & 1][ms >> j & 1];
-      const uint32_t oct = uint32_t(sx >> j & 1) | uint32_t(sy >> j & 1) << 1 | uint32_t(sz >> j & 1) << 2;
-      v.meta[k + j] = oct | perm << 4;
-      std::memcpy(&nd[kNOct][j], &oct, sizeof oct);
-      float* rec = v.node + size_t(k + j) * kNodeFields;
-      for (uint32_t f = 0; f <= kNOct; ++f) rec[f] = nd[f][j];
+      RayRecord& r = v.rec[k + j];
+      _mm256_store_ps(r.node, nd[j]);
+      _mm_store_ps(r.node + 8, _mm256_castps256_ps128(nd[8 + j]));
+      _mm256_store_ps(r.leaf, lf[j]), _mm256_store_ps(r.leaf + 8, lf[8 + j]);
     }
   }
 }
@@ -153,8 +199,7 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
 struct PairRay {
   __m256 ox, oy, oz, sx, sy, sz;  // origin permuted to (kx, ky, kz) and the shear, per half
   uint32_t kx[2], ky[2], kz[2];
-  const Rays* v;  // the rest of the two rays' records, read only for candidate hits
-  uint32_t id[2];
+  RayRecord* rec[2];  // the rest of the two rays' records, read only for candidate hits
 };
 
 inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32_t row_b) {
@@ -162,7 +207,7 @@ inline __m256 pair_rows(const TriBlock<4>& b, int corner, uint32_t row_a, uint32
 }
 
 // `lanes`: the block's real triangles (low 4 bits): padding lanes never reach the double distance.
-inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2], uint32_t lanes) {
+inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, uint32_t lanes) {
   using S = simd::V<8>;
   using f = __m256;
   using D = simd::D4v;
@@ -189,10 +234,10 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2], 
   for (int ray = 0; ray < 2; ++ray) {
     const int rm = (m >> (4 * ray)) & 15;
     if (!rm) continue;
-    const uint32_t id = r.id[ray];
+    const float* lf = r.rec[ray]->leaf;
     D num, dn;
-    plane_terms(n, v0, Vec3D<D>{D(double(r.v->ox[id])), D(double(r.v->oy[id])), D(double(r.v->oz[id]))},
-                Vec3D<D>{D(double(r.v->dx[id])), D(double(r.v->dy[id])), D(double(r.v->dz[id]))}, num, dn);
+    plane_terms(n, v0, Vec3D<D>{D(double(lf[kLO])), D(double(lf[kLO + 1])), D(double(lf[kLO + 2]))},
+                Vec3D<D>{D(double(lf[kLD])), D(double(lf[kLD + 1])), D(double(lf[kLD + 2]))}, num, dn);
     _mm_store_ps(ts + 4 * ray, (num / dn).to_float());
     if (const int par = dn.zero_mask() & rm) [[unlikely]] {
       // Edge-on (the ray lies in the plane): the sheared distance, as intersect_watertight.
@@ -201,16 +246,16 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2], 
       for (int t4 = 0; t4 < 4; ++t4) {
         const int l = 4 * ray + t4;
         if (par >> t4 & 1)
-          ts[l] = sheared_distance<1>(r.v->sz[id], us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], 1.f / dets[l]);
+          ts[l] = sheared_distance<1>(lf[kLS + 2], us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], 1.f / dets[l]);
       }
     }
   }
   for (; m; m &= m - 1) {
     const int l = std::countr_zero(unsigned(m));
     const int ray = l >> 2, t4 = l & 3;
-    Hit& h = *hit[ray];
+    Hit& h = r.rec[ray]->hit;
     const float t = ts[l];
-    if (!(t >= r.v->tmin[r.id[ray]] && t < h.t)) continue;
+    if (!(t >= r.rec[ray]->node[kNTmin] && t < h.t)) continue;
     const float inv_det = 1.f / dets[l];
     h.t = t;
     h.u = vs[l] * inv_det;
@@ -219,39 +264,42 @@ inline void pair_intersect(const PairRay& r, const TriBlock<4>& b, Hit* hit[2], 
   }
 }
 
-inline TriRay<4> tri_ray(const Rays& v, uint32_t id) {
-  const uint32_t m = v.meta[id];
-  return TriRay<4>(Vec3{v.ox[id], v.oy[id], v.oz[id]}, Vec3{v.dx[id], v.dy[id], v.dz[id]}, int(m >> 4 & 3),
-                   int(m >> 6 & 3), int(m >> 8 & 3), v.sx[id], v.sy[id], v.sz[id], v.tmin[id]);
+inline TriRay<4> tri_ray(const RayRecord& r) {
+  const uint32_t m = r.meta();
+  return TriRay<4>(r.org(), r.dir(), int(m >> 4 & 3), int(m >> 6 & 3), int(m >> 8 & 3), r.leaf[kLS],
+                   r.leaf[kLS + 1], r.leaf[kLS + 2], r.node[kNTmin]);
 }
 // The permuted origins come from prepare(), so a pair costs broadcasts only (a pair is built per
 // leaf visit: the component selection per ray was 137 instructions a pair).
-inline PairRay pair_ray(const Rays& v, uint32_t a, uint32_t b) {
+inline PairRay pair_ray(RayRecord& a, RayRecord& b) {
   PairRay p;
-  const uint32_t ma = v.meta[a], mb = v.meta[b];
+  const uint32_t ma = a.meta(), mb = b.meta();
   p.kx[0] = ma >> 4 & 3, p.ky[0] = ma >> 6 & 3, p.kz[0] = ma >> 8 & 3;
   p.kx[1] = mb >> 4 & 3, p.ky[1] = mb >> 6 & 3, p.kz[1] = mb >> 8 & 3;
-  p.v = &v, p.id[0] = a, p.id[1] = b;
-  auto two = [](const float* x, uint32_t lo, uint32_t hi) {
-    return _mm256_setr_m128(_mm_broadcast_ss(x + lo), _mm_broadcast_ss(x + hi));
+  p.rec[0] = &a, p.rec[1] = &b;
+  auto two = [&](uint32_t field) {
+    return _mm256_setr_m128(_mm_broadcast_ss(&a.leaf[field]), _mm_broadcast_ss(&b.leaf[field]));
   };
-  p.ox = two(v.px, a, b), p.oy = two(v.py, a, b), p.oz = two(v.pz, a, b);
-  p.sx = two(v.sx, a, b), p.sy = two(v.sy, a, b), p.sz = two(v.sz, a, b);
+  p.ox = two(kLP), p.oy = two(kLP + 1), p.oz = two(kLP + 2);
+  p.sx = two(kLS), p.sy = two(kLS + 1), p.sz = two(kLS + 2);
   return p;
 }
 // For the scalar kernels (moller, plane, plane_rcp): RayCtx rebuilt from the record (its tmax is
 // unused: the kernels search up to the hit's t).
-inline RayCtx ray_ctx(const Rays& v, uint32_t id) {
-  return RayCtx(Ray{Vec3{v.ox[id], v.oy[id], v.oz[id]}, v.tmin[id], Vec3{v.dx[id], v.dy[id], v.dz[id]}, INFINITY});
-}
+inline RayCtx ray_ctx(const RayRecord& r) { return RayCtx(Ray{r.org(), r.node[kNTmin], r.dir(), INFINITY}); }
 
-// What the box test of one ray reads.
+// What the box test of one ray reads: its node fields and its hit's t (line 0).
 template <class P>
 inline void probe_ray(const Rays& v, uint32_t id, P& probe) {
+  if constexpr (P::enabled) probe.read(&v.rec[id], offsetof(RayRecord, hit) + sizeof(float));
+}
+// What a leaf test of one ray reads: its leaf fields (line 1), tmin and its hit.
+template <class P>
+inline void probe_leaf_ray(const Rays& v, uint32_t id, P& probe) {
   if constexpr (P::enabled) {
-    const float* nf = node_fields(v.node, id);
-    probe.read(nf, (kNOct + 1) * sizeof(float));
-    probe.read(&v.hits[id], 4);
+    probe.read(&v.rec[id].node[kNTmin], sizeof(float));
+    probe.read(&v.rec[id].hit, sizeof(Hit));
+    probe.read(v.rec[id].leaf, (kLMeta + 1) * sizeof(float));
   }
 }
 
@@ -322,7 +370,7 @@ struct Scratch {
 // The node test's constants of ray `id`, from its record.
 template <int N>
 [[gnu::always_inline]] inline NodeRay<N> node_ray(const Rays& v, uint32_t id) {
-  const float* f = node_fields(v.node, id);
+  const float* f = v.rec[id].node;
   uint32_t oct;
   std::memcpy(&oct, f + kNOct, sizeof oct);
   return NodeRay<N>(Vec3{f[kNR], f[kNR + 1], f[kNR + 2]}, Vec3{f[kNCN], f[kNCN + 1], f[kNCN + 2]},
@@ -334,16 +382,17 @@ template <int N, TriKernel K, class P>
 inline void single(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v, uint32_t id, uint32_t ref,
                    P& probe) {
   const NodeRay<N> nr = node_ray<N>(v, id);
+  RayRecord& r = v.rec[id];
   if constexpr (K == TriKernel::watertight) {
-    mbvh_traverse<N, 4, K>(m, nullptr, nr, tri_ray(v, id), nullptr, ref, v.hits[id], s.single.data(), probe);
+    mbvh_traverse<N, 4, K>(m, nullptr, nr, tri_ray(r), nullptr, ref, r.hit, s.single.data(), probe);
   } else {
-    const RayCtx rc = ray_ctx(v, id);
-    mbvh_traverse<N, 4, K>(m, ts, nr, tri_ray(v, id), &rc, ref, v.hits[id], s.single.data(), probe);
+    const RayCtx rc = ray_ctx(r);
+    mbvh_traverse<N, 4, K>(m, ts, nr, tri_ray(r), &rc, ref, r.hit, s.single.data(), probe);
   }
 }
 
 // Alg. 2.9 on rays [0, n) of `v` (prepared) from node `root` of `m`; the closest hits go to
-// v.hits. `ts`: the triangle set in lane order for the scalar kernels (null for watertight).
+// the records' hits. `ts`: the triangle set in lane order for the scalar kernels (null for watertight).
 // N = 4: the thesis' SSE MBVH/RS. N = 8: one AVX2 8-child box test per ray and eight active-ray
 // stacks (the natural SIMD width of AVX2, as mbvh8_single).
 template <int N, TriKernel K, class P>
@@ -374,6 +423,7 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
     if (t.count == 1) {  // a stream of one ray: ordinary single-ray traversal of the subtree
       probe.read(list, sizeof(uint16_t));
       probe_ray(v, list[0], probe);
+      probe_leaf_ray(v, list[0], probe);
       single<N, K>(m, ts, s, v, list[0], t.ref, probe);
       continue;
     }
@@ -385,29 +435,27 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
         const uint32_t nblocks = (ntris + 3) / 4;
         for (; i + 1 < t.count; i += 2) {
           probe.read(&list[i], 2 * sizeof(uint16_t));
-          probe_ray(v, list[i], probe);
-          probe_ray(v, list[i + 1], probe);
-          const PairRay pr = pair_ray(v, list[i], list[i + 1]);
-          Hit* h[2] = {&v.hits[list[i]], &v.hits[list[i + 1]]};
-          for (uint32_t k = 0; k < nblocks; ++k)
-            pair_intersect(pr, blocks[first + k], h, lane_bits(block_tris<4>(ntris, k)));
+          probe_leaf_ray(v, list[i], probe);
+          probe_leaf_ray(v, list[i + 1], probe);
+          const PairRay pr = pair_ray(v.rec[list[i]], v.rec[list[i + 1]]);
+          for (uint32_t k = 0; k < nblocks; ++k) pair_intersect(pr, blocks[first + k], lane_bits(block_tris<4>(ntris, k)));
         }
       }
       for (; i < t.count; ++i) {
         probe.read(&list[i], sizeof(uint16_t));
-        const uint32_t id = list[i];
-        probe_ray(v, id, probe);
+        RayRecord& r = v.rec[list[i]];
+        probe_leaf_ray(v, list[i], probe);
         if constexpr (K == TriKernel::watertight) {
-          leaf_test<4, K>(blocks, nullptr, tri_ray(v, id), nullptr, t.ref, v.hits[id]);
+          leaf_test<4, K>(blocks, nullptr, tri_ray(r), nullptr, t.ref, r.hit);
         } else {
-          const RayCtx rc = ray_ctx(v, id);
-          leaf_test<4, K>(blocks, ts, tri_ray(v, id), &rc, t.ref, v.hits[id]);
+          const RayCtx rc = ray_ctx(r);
+          leaf_test<4, K>(blocks, ts, tri_ray(r), &rc, t.ref, r.hit);
         }
       }
       continue;
     }
     // Interior node: every ray of the task against the N child boxes: mbvh_traverse.h's box_test
-    // (the kernel library's slab test) with the ray's constants from the stream's SoA record.
+    // (the kernel library's slab test) with the ray's constants from its record's first line.
     const MBVHNode<N>& nd = nodes[t.ref];
     probe.node(&nd, sizeof(nd), t.count);
     uint8_t* masks = s.masks.data();
@@ -419,7 +467,7 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
       probe_ray(v, id, probe);
       const NodeRay<N> nr = node_ray<N>(v, id);
       f tn;
-      const f enter = box_test<N>(nd, nr, v.hits[id].t, tn);
+      const f enter = box_test<N>(nd, nr, v.rec[id].hit.t, tn);
       dsum = SN::add(dsum, SN::and_(tn, enter));
       const unsigned mk = unsigned(SN::mask(enter));
       masks[i] = uint8_t(mk);

@@ -84,12 +84,11 @@ static_assert(kRecordBytes == 36);
 constexpr uint32_t kIdBits = 24, kIdMask = (1u << kIdBits) - 1, kMaxSteps = 255;
 constexpr uint32_t kMaxChunk = 1u << kIdBits;
 
-// The per-ray constants of the node and triangle tests, computed for a whole queue at once
-// (SoA, eight rays per AVX2 instruction; the thesis' reason for SoA queues, §5.3.2). `meta`
-// packs the direction's sign octant (bits 0-2: the reciprocal is negative on x, y, z), and the
-// watertight test's axis permutation kx, ky, kz (bits 4-5, 6-7, 8-9).
-// The node test's constants are in `node` (mbvh_stream::node_fields, AoSoA).
-enum Derived : uint32_t { kIX, kIY, kIZ, kSX, kSY, kSZ, kTexit, kPX, kPY, kPZ, kDerived };
+// The per-ray constants of the octree walk, computed for a whole queue at once (SoA, eight rays
+// per AVX2 instruction; the thesis' reason for SoA queues, §5.3.2). The node and triangle tests'
+// constants and the hits are in the per-ray records (mbvh_stream::RayRecord, one 64-byte line
+// for the node test and one for leaves: a queue's rays thin out below its mini-MBVH's root).
+enum Derived : uint32_t { kIX, kIY, kIZ, kTexit, kDerived };
 
 // What the octree walk needs of a ray.
 struct WalkRay {
@@ -113,7 +112,7 @@ inline float walk_entry(const WalkRay& w, const AABB& b) {
 // The queue being processed: the shared stream record (traversal/mbvh_stream.h) over the queue's
 // SoA fields and the derived constants, plus what the octree walk needs.
 struct Stream : mbvh_stream::Rays {
-  const uint32_t* rec;  // the index field
+  const uint32_t* index;  // the index field
   float* texit;         // exit distance from the leaf box
   uint32_t* axis;       // exit axis
 };
@@ -140,12 +139,12 @@ struct Scratch {
   uint32_t partial_head = kNone, partial_tail = kNone;
   uint32_t allocated = 0;             // queues handed out so far (the rest are untouched)
   std::vector<uint32_t> leaf_partial; // per octree leaf: its partial queue or kNone
-  // The queue being processed: derived per-ray constants (SoA), hits, and the MBVH/RS stacks.
+  // The queue being processed: derived per-ray constants (SoA), the per-ray records (with the
+  // hits), and the MBVH/RS stacks.
   aligned_vector<float> derived;      // f * mp + slot
-  aligned_vector<float> node;         // the node test's record (mbvh_stream::node_fields)
-  aligned_vector<uint32_t> meta, axis;
+  aligned_vector<mbvh_stream::RayRecord> rec;
+  aligned_vector<uint32_t> axis;
   std::vector<uint32_t> moving;       // the rays of the queue that move on to another leaf
-  std::vector<Hit> hits;
   mbvh_stream::Scratch st;            // the MBVH/RS stacks (and the one-ray fallback's)
 };
 
@@ -368,7 +367,9 @@ class RayGrid final : public TraverserBase<RayGrid> {
     const __m256 inf = _mm256_set1_ps(INFINITY);
     const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
     const __m256i one = _mm256_set1_epi32(1), two = _mm256_set1_epi32(2);
-    const __m256i hit_t = _mm256_setr_epi32(0, 4, 8, 12, 16, 20, 24, 28);  // Hit::t of 8 hits (x 4 bytes)
+    // Hit::t of 8 consecutive records (x 4 bytes).
+    const __m256i hit_t = _mm256_mullo_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+                                             _mm256_set1_epi32(int(sizeof(mbvh_stream::RayRecord) / 4)));
     const float* o[3] = {v.ox, v.oy, v.oz};
     const float* in[3] = {v.ix, v.iy, v.iz};
     uint32_t count = 0;
@@ -389,7 +390,7 @@ class RayGrid final : public TraverserBase<RayGrid> {
       _mm256_store_ps(v.texit + k, texit);
       _mm256_store_si256(reinterpret_cast<__m256i*>(v.axis + k), ax);
       // Moving on: tbest > t_exit (an infinite t_exit never: no face to leave through).
-      const __m256 tbest = _mm256_i32gather_ps(&v.hits[k].t, hit_t, 4);
+      const __m256 tbest = _mm256_i32gather_ps(&v.rec[k].hit.t, hit_t, 4);
       unsigned m = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(tbest, texit, _CMP_GT_OQ)));
       if (k + 8 > n) m &= (1u << (n - k)) - 1;
       for (; m; m &= m - 1) moving[count++] = k + uint32_t(std::countr_zero(m));
@@ -445,11 +446,9 @@ class RayGrid final : public TraverserBase<RayGrid> {
     s.leaf_partial.assign(oct.leaves.size(), kNone);
     if (s.derived.size() < kDerived * mp) {
       s.derived.resize(kDerived * mp);
-      s.node.resize(mbvh_stream::node_record_floats(mp));
-      s.meta.resize(mp);
+      s.rec.resize(mp);
       s.axis.resize(mp);
       s.moving.resize(mp);
-      s.hits.resize(mp);
     }
     s.st.reserve(N, depth_, M);
     c.rays += n;
@@ -550,15 +549,13 @@ class RayGrid final : public TraverserBase<RayGrid> {
       c.queued_rays += cnt;
       const float* b = qbase(s, q);
       const Stream v{{b + kOX * mp, b + kOY * mp, b + kOZ * mp, b + kDX * mp, b + kDY * mp, b + kDZ * mp,
-                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, s.node.data(), d + kSX * mp,
-                      d + kSY * mp, d + kSZ * mp, d + kPX * mp, d + kPY * mp,
-                      d + kPZ * mp, s.meta.data(), s.hits.data()},
+                      b + kTmin * mp, d + kIX * mp, d + kIY * mp, d + kIZ * mp, s.rec.data()},
                      reinterpret_cast<const uint32_t*>(b + kId * mp), d + kTexit * mp, s.axis.data()};
       if constexpr (P::enabled)
         for (uint32_t k = 0; k < cnt; ++k)
           for (uint32_t f = 0; f < kFields; ++f) probe.read(&b[f * mp + k], 4);
       mbvh_stream::prepare(v, cnt, mini<N>().coord_bound);
-      for (uint32_t k = 0; k < cnt; ++k) v.hits[k] = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
+      for (uint32_t k = 0; k < cnt; ++k) v.rec[k].hit = Hit{b[kTbest * mp + k], kNoHit, 0.f, 0.f};
 
       mbvh_stream::trace<N, K>(mini<N>(), tris_.get(), s.st, v, cnt, lf.mbvh_root, order_, probe);
 
@@ -567,18 +564,18 @@ class RayGrid final : public TraverserBase<RayGrid> {
       // in SIMD, and the rays whose closest hit lies beyond the exit cross into the next leaf.
       Hit dummy;
       for (uint32_t k = 0; k < cnt; ++k) {
-        const uint32_t i = first + (v.rec[k] & kIdMask);
-        Hit* dst = v.hits[k].prim != kNoHit ? &out[i] : &dummy;  // a select, not a branch
-        *dst = v.hits[k];
+        const uint32_t i = first + (v.index[k] & kIdMask);
+        Hit* dst = v.rec[k].hit.prim != kNoHit ? &out[i] : &dummy;  // a select, not a branch
+        *dst = v.rec[k].hit;
         if constexpr (P::enabled)
           if (dst != &dummy) probe.write(&out[i], sizeof(Hit));
       }
       const uint32_t moving = exit_stream(v, cnt, lnode, s.moving.data());
       for (uint32_t j = 0; j < moving; ++j) {
         const uint32_t k = s.moving[j];
-        const uint32_t rec = v.rec[k];
+        const uint32_t rec = v.index[k];
         const WalkRay w{{v.ox[k], v.oy[k], v.oz[k]}, {v.dx[k], v.dy[k], v.dz[k]}, {v.ix[k], v.iy[k], v.iz[k]},
-                        v.tmin[k], v.hits[k].t};
+                        v.tmin[k], v.rec[k].hit.t};
         uint32_t next = cross(w, lf.node, int(v.axis[k]), v.texit[k], probe);
         if (next == kNone) continue;  // left the scene
         if (!worth(w, next)) {
