@@ -149,7 +149,9 @@ TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
       {"bvh_single", "bins", "x"},       {"bvh_masked", "split", "2"},        {"mbvh8_single", "collapse", "best"},
       {"mbvh8_single", "tri_width", "6"}, {"mbvh_rs", "width", "16"},         {"raygrid", "queue", "0"},
       {"kd_single", "kd_ct", "nan"},     {"kd_packet", "kd_packet", "12"},     {"embree_single", "robust", "yes"},
-      {"mbvh4_single", "small", "2"},    {"bvh_ranged", "tricull", "-1"}};
+      {"mbvh4_single", "small", "2"},    {"bvh_ranged", "tricull", "-1"},
+      // 4-wide leaf blocks: `small` (which leaves of 8-wide blocks take a 4-wide one) only takes 0.
+      {"mbvh4_single", "small", "4"},    {"mbvh_rs", "small", "4"}};
   for (const auto& [scheme, key, value] : bad) {
     SchemeConfig c;
     c.params[key] = value;
@@ -157,7 +159,8 @@ TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
   }
   const std::vector<std::tuple<std::string, std::string, std::string>> good = {
       {"bvh_single", "leaf_size", "1"}, {"bvh_single", "leaf_size", "64"}, {"bvh_masked", "split", "true"},
-      {"mbvh_rs", "merge", "16"},       {"mbvh_rs", "collapse", "sah"},     {"kd_single", "kd_ct", "3.5"}};
+      {"mbvh_rs", "merge", "16"},       {"mbvh_rs", "collapse", "sah"},     {"kd_single", "kd_ct", "3.5"},
+      {"mbvh8_single", "small", "4"},   {"mbvh_rs", "small", "0"}};
   for (const auto& [scheme, key, value] : good) {
     SchemeConfig c;
     c.params[key] = value;

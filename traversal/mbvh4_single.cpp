@@ -11,7 +11,7 @@ namespace tb {
 namespace {
 
 // Binary leaves of up to 4 triangles, and subtrees of up to 4 merged into one block.
-constexpr MBVHDefaults kDefaults{4, 4, false, 4};
+constexpr MBVHDefaults kDefaults{4, 4, false, 0, false, false};
 
 class MBVH4Single final : public MBVHScheme<MBVH4Single, MBVHData<4, 4>> {
  public:

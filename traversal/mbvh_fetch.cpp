@@ -18,8 +18,10 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
                     real_param("prim_share", p.prim_share, 0, 1,
                                "SAH collapse: prim_cost charges only triangles whose box, clipped to the leaf's, "
                                "has at least this share of the leaf box's surface area (0: every triangle)"),
-                    int_choice_param("small", d.small, {0, 4},
-                                     "8-wide blocks: leaves of at most this many triangles take a 4-wide block")};
+                    d.wide_blocks ? int_choice_param("small", d.small, {0, 4},
+                                                     "8-wide blocks: leaves of at most this many triangles take a "
+                                                     "4-wide block")
+                                  : int_choice_param("small", 0, {0}, "always 0: this scheme's leaves are 4-wide blocks")};
 }
 
 MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {

@@ -20,6 +20,9 @@ struct MBVHDefaults {
   bool sah = false;
   int small = 4;
   bool spatial = false;  // the binary BVH's spatial splits (bvh_param_specs)
+  // false: the scheme's leaves are 4-wide blocks (MBVH<N, 4>), where `small` means nothing, so the
+  // parameter only takes 0 (a value that changed nothing was accepted before).
+  bool wide_blocks = true;
 };
 // mbvh8_single's (and treelet_queue's, which runs its loop on the same cached tree): SAH collapse,
 // leaves of up to 16 triangles. Every leaf in 8-wide blocks by default (small=0): one leaf path

@@ -50,7 +50,7 @@ constexpr int kDefaultStream = 8192;
 // 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
 // (mbvh8_single's) with leaves of up to 8 triangles (two blocks). bounce:3, rays/s relative
 // to mbvh8_single, merge 4 / 8 / 16: conference 1.12 / 1.23 / 1.26, sponza 1.16 / 1.25 / 1.11.
-constexpr MBVHDefaults kDefaults4{4, 4, false, 4}, kDefaults8{4, 8, true, 4};
+constexpr MBVHDefaults kDefaults4{4, 4, false, 0, false, false}, kDefaults8{4, 8, true, 0, false, false};
 
 class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBVHData<8, 4>> {
  public:
