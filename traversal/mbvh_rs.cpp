@@ -21,9 +21,11 @@
 // rays per node is what limits the scheme), and today's L2 holds it. Measured on bounce:3 at
 // 512x512, 2 interleaved rounds, mbvh_rs / mbvh8_single with stream = 256 / 2048 / 8192 / 65536:
 // conference 1.29 / 1.39 / 1.46 / 1.17, sponza 1.00 / 1.23 / 1.32 / 0.99, sibenik 0.92 / 1.18 /
-// 1.33 / 0.99 (docs/PERFORMANCE.md, "Session 12"). Past the knee the stream's records (then 96 bytes a
-// ray; 156 since session 18's records) leave L2: the simulated cache on sponza puts it between 8192 and 16384 rays for a 512 KB
-// L2 (Zen 3: 7.9 vs 34 L3 hits per ray) and between 16384 and 65536 for this VM's 2 MB.
+// 1.33 / 0.99 (docs/PERFORMANCE.md, "Session 12"). Past the knee the stream's records (then 96
+// bytes a ray, 156 since session 18's per-ray records) leave L2: the simulated cache on sponza put
+// it between 8192 and 16384 rays for a 512 KB L2 (Zen 3: 7.9 vs 34 L3 hits per ray) and between
+// 16384 and 65536 for that VM's 2 MB; with the larger records it prefers 4096 for a 512 KB L2
+// (reads only, not yet timed there: docs/PERFORMANCE.md, "Session 18").
 //
 // `width`: 4 = the thesis' SSE layout (MBVH<4,4>, greedy collapse, leaves merged up to 4
 // triangles); 8 = AVX2 nodes (MBVH<8,4>, SAH-optimal collapse of Ylitie et al. 2017 as
