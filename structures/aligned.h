@@ -35,6 +35,21 @@ struct AlignedAllocator {
 template <class T, size_t Align = 64>
 using aligned_vector = std::vector<T, AlignedAllocator<T, Align>>;
 
+// The same storage, but `resize` leaves new elements of trivial types uninitialised, so a large
+// scratch array whose parts are written before they are read (raygrid's ray queues) costs no
+// memset and faults in only the pages actually used.
+template <class T, size_t Align = 64>
+struct UninitAllocator : AlignedAllocator<T, Align> {
+  template <class U> struct rebind { using other = UninitAllocator<U, Align>; };
+  UninitAllocator() = default;
+  template <class U> UninitAllocator(const UninitAllocator<U, Align>&) {}
+  template <class U> void construct(U* p) noexcept { ::new (static_cast<void*>(p)) U; }
+  template <class U, class... A> void construct(U* p, A&&... a) { ::new (static_cast<void*>(p)) U(static_cast<A&&>(a)...); }
+  bool operator==(const UninitAllocator&) const { return true; }
+};
+template <class T, size_t Align = 64>
+using uninit_vector = std::vector<T, UninitAllocator<T, Align>>;
+
 // Huge pages for the arrays a traversal reads. A traversal of a scene of millions of triangles
 // fetches nodes scattered over hundreds of MiB: with 4 KiB pages nearly every such fetch is also a
 // TLB miss and a page walk. MADV_HUGEPAGE asks Linux to back a block with 2 MiB pages (its

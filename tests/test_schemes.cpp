@@ -168,6 +168,31 @@ TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
   }
 }
 
+// The split_* parameters steer spatial splits only: without them (spatial=0, the binary BVH
+// schemes' default) a value other than the default is refused rather than ignored; with
+// spatial=1 it is taken. (Every split_* default is non-zero except split_overlap's.)
+TEST(Registry, SpatialSplitParametersAreRefusedWithoutSpatialSplits) {
+  for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"}) {
+    SchemeConfig off;
+    off.params[key] = std::string(key) == "split_overlap" ? "0.5" : "0";
+    try {
+      make_scheme("bvh_single", off);
+      ADD_FAILURE() << key << " accepted with spatial=0";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("bvh_single"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("spatial=1"), std::string::npos) << e.what();
+    }
+    off.params["spatial"] = "0";
+    EXPECT_THROW(make_scheme("mbvh8_single", off), InputError) << key;
+    SchemeConfig on = off;
+    on.params["spatial"] = "1";
+    EXPECT_NO_THROW(make_scheme("bvh_single", on)) << key;
+    SchemeConfig dflt;  // mbvh8_single builds spatial splits by default
+    dflt.params[key] = "0";
+    EXPECT_NO_THROW(make_scheme("mbvh8_single", dflt)) << key;
+  }
+}
+
 // `--param isa=NAME` (issue 17: like-for-like Embree comparisons across machines) runs Embree's
 // kernels for that ISA: sse2 exists on every x86-64 CPU and selects Embree's 4-wide BVH, a
 // different kernel from the default's, which must still match the reference; a name Embree does

@@ -34,6 +34,19 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   p.split_wall = float(cfg.get_real("split_wall"));
   p.split_overlap = float(cfg.get_real("split_overlap"));
   p.split_walls = cfg.get_bool("split_walls");
+  // The split_* parameters steer the spatial-split build only; given a value other than their
+  // default without it they would change nothing, so they are refused (every option either works
+  // or is refused).
+  auto number = [](const ParamSpec& spec, const std::string& v) {
+    return spec.type == ParamType::boolean ? double(param_to_bool(v)) : param_to_real(v);
+  };
+  if (!p.spatial && cfg.declared)
+    for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"})
+      if (const ParamSpec* spec = find_param(*cfg.declared, key);
+          cfg.given(key) && number(*spec, cfg.params.at(key)) != number(*spec, spec->fallback))
+        throw InputError(std::string("parameter '") + key +
+                         "' only applies to spatial-split builds, and this scheme builds without them (spatial=0): "
+                         "add --param spatial=1 or drop " + key);
   return p;
 }
 

@@ -128,8 +128,9 @@ struct Counters {
 // ranges never share.
 struct Scratch {
   uint32_t mp = 0;                    // the field arrays' stride (mbvh_stream::field_stride)
-  // Queues: data[q * kFields * mp + f * mp + slot], every field array 32-byte aligned.
-  aligned_vector<float> data;
+  // Queues: data[q * kFields * mp + f * mp + slot], every field array 32-byte aligned; left
+  // uninitialised, as every slot is written when a ray is queued, before it is read.
+  uninit_vector<float> data;
   std::vector<uint32_t> count, leaf, prev, next;
   std::vector<uint32_t> empty;        // stack of empty queues
   // Full queues: a chain per leaf (through `next`), and a stack of the leaves that have one, so

@@ -51,7 +51,12 @@ std::vector<std::string> names_of(const ParamSpecs& specs) {
 }  // namespace
 
 std::unique_ptr<Traverser> make_scheme(const std::string& name, const SchemeConfig& cfg) {
-  return find_scheme(name).make(resolve_config(name, cfg));
+  SchemeConfig resolved = resolve_config(name, cfg);
+  try {
+    return find_scheme(name).make(resolved);
+  } catch (const InputError& e) {  // a combination of parameters the scheme refuses: name it
+    throw InputError("scheme " + name + ": " + e.what());
+  }
 }
 
 SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg) {
@@ -67,6 +72,7 @@ SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg) {
     if (!spec) unknown_param(key, names_of(info.params), "scheme " + name);
     spec->check(value);
     resolved.params[key] = value;
+    resolved.user_keys.insert(key);
   }
   for (const auto& spec : info.params)
     if (!spec.fallback.empty()) resolved.params.emplace(spec.name, spec.fallback);
