@@ -1,5 +1,6 @@
 #include "structures/bvh.h"
 #include "structures/bvh_spatial.h"
+#include "structures/box_simd.h"
 
 #include <immintrin.h>
 
@@ -33,21 +34,6 @@ std::string BVHStats::describe() const {
 }
 
 namespace {
-
-// Min/max with std::min/std::max semantics (vmin/vmax in vec3.h): minps returns its second
-// operand unless the first is strictly smaller, so the accumulator goes second. Keeps ±0 and the
-// boxes bit-identical to the scalar AABB::grow.
-inline __m128 grow_lo(__m128 acc, __m128 x) { return _mm_min_ps(x, acc); }
-inline __m128 grow_hi(__m128 acc, __m128 x) { return _mm_max_ps(x, acc); }
-
-// AABB::area() of a non-empty box, same operation order: 2 * (ex*ey + ey*ez + ez*ex).
-inline float area(__m128 lo, __m128 hi) {
-  const __m128 e = _mm_sub_ps(hi, lo);
-  const __m128 p = _mm_mul_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(3, 0, 2, 1)));  // (ex*ey, ey*ez, ez*ex)
-  alignas(16) float f[4];
-  _mm_store_ps(f, p);
-  return 2.f * (f[0] + f[1] + f[2]);
-}
 
 // PrimRef (bvh.h) as SSE registers.
 inline __m128 vlo(const PrimRef& r) { return _mm_load_ps(r.lo); }

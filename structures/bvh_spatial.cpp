@@ -6,17 +6,12 @@
 #include <chrono>
 #include <cmath>
 
+#include "structures/box_simd.h"
 #include "structures/clip.h"
 
 
 namespace tb {
 namespace {
-
-struct Bin {
-  AABB box;
-  uint32_t count = 0;  // object bins: references; spatial bins: entries
-  uint32_t exits = 0;  // spatial bins: references whose last bin this is
-};
 
 struct Split {
   enum Kind { none, object, spatial, walls } kind = none;  // walls: walls_apart's split
@@ -29,6 +24,19 @@ struct Split {
 struct Task {
   uint32_t node, depth;
   std::vector<SpatialRef> refs;
+};
+
+// A SpatialRef's box as SSE registers (box_simd.h): unaligned loads inside the 28-byte record.
+// Lane 3 of lo is box.hi.x, which no result reads; lane 3 of hi would be the bits of `prim` (a
+// denormal as a float, slow in some arithmetic), so it is zeroed.
+inline __m128 ref_lo(const SpatialRef& r) { return _mm_loadu_ps(&r.box.lo.x); }
+inline __m128 ref_hi(const SpatialRef& r) { return _mm_blend_ps(_mm_loadu_ps(&r.box.hi.x), _mm_setzero_ps(), 8); }
+
+struct BinBox {
+  __m128 lo, hi;
+};
+struct alignas(16) Float4 {
+  float v[4];
 };
 
 class SpatialBuilder {
@@ -62,7 +70,8 @@ class SpatialBuilder {
         continue;
       }
       std::vector<SpatialRef> left, right;
-      if (!split(t.refs, box, left, right)) {
+      AABB lb, rb;
+      if (!split(t.refs, box, left, right, lb, rb)) {
         BVHNode& n = bvh.nodes[t.node];
         n.left_first = uint32_t(bvh.prim_index.size());
         n.count = uint32_t(t.refs.size());
@@ -70,9 +79,6 @@ class SpatialBuilder {
         continue;
       }
       const uint32_t l = uint32_t(bvh.nodes.size());
-      AABB lb, rb;
-      for (const auto& r : left) lb.grow(r.box);
-      for (const auto& r : right) rb.grow(r.box);
       bvh.nodes.push_back({lb.lo, 0, lb.hi, uint32_t(left.size())});
       bvh.nodes.push_back({rb.lo, 0, rb.hi, uint32_t(right.size())});
       bvh.nodes[t.node].left_first = l;
@@ -113,17 +119,15 @@ class SpatialBuilder {
   // ground quad isolated with a few walls by the object splits above) spatial splits keep paying
   // far below min_refs, so such subtrees are not handed off, down to large_min_refs.
   static bool has_large_ref(const std::vector<SpatialRef>& refs, const AABB& box) {
-    const Vec3 half = box.extent() * 0.5f;
-    for (const auto& r : refs) {
-      const Vec3 e = r.box.extent();
-      if (e.x > half.x || e.y > half.y || e.z > half.z) return true;
-    }
+    const __m128 half = _mm_mul_ps(_mm_sub_ps(load_vec3(box.hi), load_vec3(box.lo)), _mm_set1_ps(0.5f));
+    for (const auto& r : refs)
+      if (_mm_movemask_ps(_mm_cmpgt_ps(_mm_sub_ps(ref_hi(r), ref_lo(r)), half)) & 7) return true;
     return false;
   }
 
-  // Splits refs into left/right, or returns false for a leaf.
+  // Splits refs into left/right with their boxes, or returns false for a leaf.
   bool split(std::vector<SpatialRef>& refs, const AABB& box, std::vector<SpatialRef>& left,
-             std::vector<SpatialRef>& right) {
+             std::vector<SpatialRef>& right, AABB& lbox, AABB& rbox) {
     const uint32_t count = uint32_t(refs.size());
     if (count <= 1) return false;
     Split best = object_split(refs);
@@ -137,7 +141,7 @@ class SpatialBuilder {
       const Split s = spatial_split(refs, box);
       if (s.cost < best.cost) best = s;
     }
-    walls_apart(refs, best);
+    if (walls_.cost < best.cost) best = walls_;  // walls_apart's candidate, from object_split's pass
     const float parent_area = std::max(box.area(), 1e-30f);
     const float split_cost = p_.cost_traversal + p_.cost_intersect * best.cost / parent_area;
     const float leaf_cost = p_.cost_intersect * float(count);
@@ -150,101 +154,146 @@ class SpatialBuilder {
       do_spatial(refs, box, best, left, right);
       // A split that could not separate anything (all references straddle and every one was
       // kept on both sides) would recurse forever: fall back to the object split.
-      if (left.size() < count && right.size() < count && !left.empty() && !right.empty()) return true;
+      if (left.size() < count && right.size() < count && !left.empty() && !right.empty()) {
+        lbox = bounds(left), rbox = bounds(right);
+        return true;
+      }
       used_ -= std::min(used_, left.size() + right.size() - count);
       left.clear();
       right.clear();
       best = object_split(refs);
     }
+    // The other kinds' child boxes are the unions their sweep or pass already formed.
     if (best.kind == Split::walls) {
       for (auto& r : refs) (is_wall(r) ? left : right).push_back(r);
+      lbox = best.left, rbox = best.right;
       return true;
     }
     if (best.kind == Split::object) {
+      // The bins object_split gave the centroids (kept in cen_, same floats).
       const int a = best.axis;
-      const AABB cb = centroid_bounds(refs);
-      const float scale = obins_ / (cb.hi[a] - cb.lo[a]);
-      for (auto& r : refs)
-        (obin(r.box.centre()[a], cb.lo[a], scale) < best.pos ? left : right).push_back(r);
-      if (!left.empty() && !right.empty()) return true;
+      const float lo = ocl_.v[a], scale = osc_.v[a];
+      for (uint32_t i = 0; i < count; ++i) (obin(cen_[i].v[a], lo, scale) < best.pos ? left : right).push_back(refs[i]);
+      if (!left.empty() && !right.empty()) {
+        lbox = best.left, rbox = best.right;
+        return true;
+      }
       left.clear();
       right.clear();
     }
     // No usable split (coincident centroids) but too many references for one leaf: halve.
     left.assign(refs.begin(), refs.begin() + count / 2);
     right.assign(refs.begin() + count / 2, refs.end());
+    lbox = bounds(left), rbox = bounds(right);
     return true;
   }
 
-  static AABB centroid_bounds(const std::vector<SpatialRef>& refs) {
-    AABB cb;
-    for (const auto& r : refs) cb.grow(r.box.centre());
-    return cb;
+  static AABB bounds(const std::vector<SpatialRef>& refs) {
+    __m128 lo = _mm_set1_ps(INFINITY), hi = _mm_set1_ps(-INFINITY);
+    for (const auto& r : refs) lo = grow_lo(lo, ref_lo(r)), hi = grow_hi(hi, ref_hi(r));
+    return to_aabb(lo, hi);
   }
   int obin(float centre, float lo, float scale) const { return std::clamp(int((centre - lo) * scale), 0, obins_ - 1); }
 
-  // Binned SAH over reference centroids (Wald 2007), as structures/bvh.cpp. The centroids are
-  // computed once per node (they were recomputed per axis: a fifth of the build).
+  // Binned SAH over reference centroids (Wald 2007), as structures/bvh.cpp, in SSE: one pass
+  // forms the centroids (kept for the partition) and their bounds, a second bins all three axes.
+  // The same float operations as the scalar AABB code, so the same tree. With walls
+  // (SpatialSplitParams::walls_apart), the first pass also forms the candidate "the node's
+  // walls | the rest" (walls_), which the binned splits place by centroid among the rest.
   Split object_split(const std::vector<SpatialRef>& refs) {
     Split best;
-    cen_.resize(refs.size());
-    AABB cb;
-    for (size_t i = 0; i < refs.size(); ++i) cb.grow(cen_[i] = refs[i].box.centre());
-    // The three axes' bins in one pass over the references (x, y, z named, not indexed: Vec3's
-    // operator[] is a branch chain).
-    const Vec3 ext = cb.extent();
-    const bool on[3] = {ext.x > 0.f, ext.y > 0.f, ext.z > 0.f};
-    const Vec3 scale{on[0] ? obins_ / ext.x : 0.f, on[1] ? obins_ / ext.y : 0.f, on[2] ? obins_ / ext.z : 0.f};
-    for (auto& bins : obins3_) bins.assign(obins_, Bin{});
-    for (size_t i = 0; i < refs.size(); ++i) {
-      const Vec3 c = cen_[i];
-      const AABB& box = refs[i].box;
-      Bin& bx = obins3_[0][obin(c.x, cb.lo.x, scale.x)];
-      Bin& by = obins3_[1][obin(c.y, cb.lo.y, scale.y)];
-      Bin& bz = obins3_[2][obin(c.z, cb.lo.z, scale.z)];
-      bx.box.grow(box), bx.count++;
-      by.box.grow(box), by.count++;
-      bz.box.grow(box), bz.count++;
+    const size_t n = refs.size();
+    const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY), half = _mm_set1_ps(0.5f);
+    cen_.resize(n);
+    __m128 cl = inf, ch = ninf;
+    walls_ = Split{};
+    if (wall_.empty() || !sp_.walls_apart) {
+      for (size_t i = 0; i < n; ++i) {
+        const __m128 c = _mm_mul_ps(_mm_add_ps(ref_lo(refs[i]), ref_hi(refs[i])), half);
+        _mm_store_ps(cen_[i].v, c);
+        cl = grow_lo(cl, c), ch = grow_hi(ch, c);
+      }
+    } else {
+      __m128 wl = inf, wh = ninf, xl = inf, xh = ninf;
+      uint32_t nw = 0;
+      for (size_t i = 0; i < n; ++i) {
+        const __m128 lo = ref_lo(refs[i]), hi = ref_hi(refs[i]);
+        const __m128 c = _mm_mul_ps(_mm_add_ps(lo, hi), half);
+        _mm_store_ps(cen_[i].v, c);
+        cl = grow_lo(cl, c), ch = grow_hi(ch, c);
+        if (is_wall(refs[i])) wl = grow_lo(wl, lo), wh = grow_hi(wh, hi), ++nw;
+        else xl = grow_lo(xl, lo), xh = grow_hi(xh, hi);
+      }
+      if (nw != 0 && nw != n) {
+        walls_.kind = Split::walls;
+        walls_.left = to_aabb(wl, wh), walls_.right = to_aabb(xl, xh);
+        walls_.cost = walls_.left.area() * float(nw) + walls_.right.area() * float(n - nw);
+      }
+    }
+    // The three axes' bins in one pass over the centroids; an axis whose centroids coincide gets
+    // scale 0 (every reference in bin 0) and no sweep.
+    _mm_store_ps(ocl_.v, cl);
+    Float4 ext;
+    _mm_store_ps(ext.v, _mm_sub_ps(ch, cl));
+    bool on[3];
+    for (int a = 0; a < 3; ++a) on[a] = ext.v[a] > 0.f, osc_.v[a] = on[a] ? float(obins_) / ext.v[a] : 0.f;
+    osc_.v[3] = 0.f;
+    const __m128 vlo = _mm_load_ps(ocl_.v), vscale = _mm_load_ps(osc_.v);
+    const __m128i maxbin = _mm_set1_epi32(obins_ - 1), zero = _mm_setzero_si128();
+    obox_.assign(size_t(3) * obins_, BinBox{inf, ninf});
+    ocount_.assign(size_t(3) * obins_, 0u);
+    BinBox* bb = obox_.data();
+    uint32_t* bc = ocount_.data();
+    for (size_t i = 0; i < n; ++i) {
+      const __m128i k = _mm_max_epi32(
+          _mm_min_epi32(_mm_cvttps_epi32(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(cen_[i].v), vlo), vscale)), maxbin), zero);
+      const int k0 = _mm_cvtsi128_si32(k), k1 = _mm_extract_epi32(k, 1) + obins_,
+                k2 = _mm_extract_epi32(k, 2) + 2 * obins_;
+      const __m128 lo = ref_lo(refs[i]), hi = ref_hi(refs[i]);
+      bb[k0].lo = grow_lo(bb[k0].lo, lo), bb[k0].hi = grow_hi(bb[k0].hi, hi), bc[k0]++;
+      bb[k1].lo = grow_lo(bb[k1].lo, lo), bb[k1].hi = grow_hi(bb[k1].hi, hi), bc[k1]++;
+      bb[k2].lo = grow_lo(bb[k2].lo, lo), bb[k2].hi = grow_hi(bb[k2].hi, hi), bc[k2]++;
     }
     for (int a = 0; a < 3; ++a)
-      if (on[a])
-        sweep(obins3_[a], a, Split::object, best, [](const Bin& b) { return b.count; },
-              [](const Bin& b) { return b.count; });
+      if (on[a]) sweep(bb + size_t(a) * obins_, bc + size_t(a) * obins_, bc + size_t(a) * obins_, obins_, a, Split::object, best);
     return best;
   }
 
-  // Sweeps bins for the cheapest plane; `enter(b)` counts references on the left of a plane after
-  // bin b, `leave(b)` those on the right before it.
-  template <class Enter, class Leave>
-  void sweep(const std::vector<Bin>& bins, int axis, Split::Kind kind, Split& best, Enter enter, Leave leave) {
-    const int nb = int(bins.size());
+  // Sweeps nb bins (boxes b) for the cheapest plane (SAH, Wald 2007): enter[k] references lie on
+  // the left of every plane after bin k, leave[k] on the right of every plane before it (object
+  // bins: both their count; spatial bins: entries and exits). A side without references offers
+  // no split. Areas as AABB::area() (0 for an empty box), so the scalar sweep's choice.
+  void sweep(const BinBox* b, const uint32_t* enter, const uint32_t* leave, int nb, int axis, Split::Kind kind,
+             Split& best) {
+    auto box_area = [](__m128 lo, __m128 hi) {
+      return (_mm_movemask_ps(_mm_cmple_ps(lo, hi)) & 7) == 7 ? area(lo, hi) : 0.f;
+    };
     right_area_.resize(nb);
     right_count_.resize(nb);
-    AABB acc;
+    right_box_.resize(nb);
+    __m128 lo = _mm_set1_ps(INFINITY), hi = _mm_set1_ps(-INFINITY);
     uint32_t c = 0;
     for (int i = nb - 1; i > 0; --i) {
-      acc.grow(bins[i].box);
-      c += leave(bins[i]);
-      right_area_[i] = acc.area();
+      lo = grow_lo(lo, b[i].lo), hi = grow_hi(hi, b[i].hi);
+      c += leave[i];
+      right_area_[i] = box_area(lo, hi);
       right_count_[i] = c;
+      right_box_[i] = {lo, hi};
     }
-    acc = AABB{};
+    lo = _mm_set1_ps(INFINITY), hi = _mm_set1_ps(-INFINITY);
     c = 0;
     for (int i = 0; i < nb - 1; ++i) {
-      acc.grow(bins[i].box);
-      c += enter(bins[i]);
+      lo = grow_lo(lo, b[i].lo), hi = grow_hi(hi, b[i].hi);
+      c += enter[i];
       if (c == 0 || right_count_[i + 1] == 0) continue;
-      const float cost = acc.area() * float(c) + right_area_[i + 1] * float(right_count_[i + 1]);
+      const float cost = box_area(lo, hi) * float(c) + right_area_[i + 1] * float(right_count_[i + 1]);
       if (cost < best.cost) {
         best.kind = kind;
         best.cost = cost;
         best.axis = axis;
         best.pos = i + 1;
-        best.left = acc;
-        // The right box is recomputed when needed (only the object split's is read, for overlap).
-        AABB r;
-        for (int k = i + 1; k < nb; ++k) r.grow(bins[k].box);
-        best.right = r;
+        best.left = to_aabb(lo, hi);
+        best.right = to_aabb(right_box_[i + 1].lo, right_box_[i + 1].hi);
       }
     }
   }
@@ -295,23 +344,6 @@ class SpatialBuilder {
     }
   }
   bool is_wall(const SpatialRef& r) const { return !wall_.empty() && wall_[r.prim]; }
-  // SpatialSplitParams::walls_apart: the split "the node's walls | the rest" as a candidate of
-  // the SAH beside the binned ones (which place a whole wall by its centroid, among its
-  // neighbours); replaces `best` where it costs less.
-  void walls_apart(const std::vector<SpatialRef>& refs, Split& best) const {
-    if (wall_.empty() || !sp_.walls_apart) return;
-    Split s;
-    uint32_t nw = 0, no = 0;
-    for (const auto& r : refs) {
-      if (is_wall(r)) s.left.grow(r.box), ++nw;
-      else s.right.grow(r.box), ++no;
-    }
-    if (nw == 0 || no == 0) return;
-    s.kind = Split::walls;
-    s.cost = s.left.area() * float(nw) + s.right.area() * float(no);
-    if (s.cost < best.cost) best = s;
-  }
-
   // Chopped binning (Stich et al. §4.1): a reference enters its first bin and exits its last;
   // in every bin it spans it adds the bounds of its part clipped to that bin.
   Split spatial_split(const std::vector<SpatialRef>& refs, const AABB& box) {
@@ -321,31 +353,36 @@ class SpatialBuilder {
       if (a == 0) spatial_bins<0>(refs, box);
       else if (a == 1) spatial_bins<1>(refs, box);
       else spatial_bins<2>(refs, box);
-      sweep(bins_, a, Split::spatial, best, [](const Bin& b) { return b.count; }, [](const Bin& b) { return b.exits; });
+      sweep(sbox_, scount_, sexit_, sbins_, a, Split::spatial, best);
     }
     return best;
   }
   // The bins of one axis A (a template: constant coordinate accesses in the per-reference loop).
+  // The boxes of references inside one bin grow the SSE bin boxes; the chopped parts grow parts_
+  // (chop_triangle_bounds grows an AABB array), joined to the bins at the end.
   template <int A>
   void spatial_bins(const std::vector<SpatialRef>& refs, const AABB& box) {
-    std::vector<Bin>& bins = bins_;
-    bins.assign(sbins_, Bin{});
+    const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY);
+    uint32_t *count = scount_, *exits = sexit_;
+    std::fill(count, count + sbins_, 0u);
+    std::fill(exits, exits + sbins_, 0u);
+    BinBox* bb = sbox_;
+    std::fill(bb, bb + sbins_, BinBox{inf, ninf});
     const AxisBins ab(*this, box, A);
-    // The chopped parts' boxes, apart from the bins (chop_triangle_bounds grows an AABB array).
-    AABB* sbox = parts_;
-    std::fill(sbox, sbox + sbins_, AABB{});
+    AABB* parts = parts_;
+    std::fill(parts, parts + sbins_, AABB{});
     for (const auto& r : refs) {
       if (is_wall(r)) {  // never clipped: whole, in the bin of its centroid
-        Bin& b = bins[ab.bin(r.box.centre()[A])];
-        b.count++, b.exits++;
-        b.box.grow(r.box);
+        const int k = ab.bin(r.box.centre()[A]);
+        count[k]++, exits[k]++;
+        bb[k].lo = grow_lo(bb[k].lo, ref_lo(r)), bb[k].hi = grow_hi(bb[k].hi, ref_hi(r));
         continue;
       }
       const int b0 = ab.bin(r.box.lo[A]), b1 = ab.bin(r.box.hi[A]);
-      bins[b0].count++;
-      bins[b1].exits++;
+      count[b0]++;
+      exits[b1]++;
       if (b0 == b1) {
-        bins[b0].box.grow(r.box);
+        bb[b0].lo = grow_lo(bb[b0].lo, ref_lo(r)), bb[b0].hi = grow_hi(bb[b0].hi, ref_hi(r));
         continue;
       }
       // Chop the reference at each plane it crosses (Stich et al. §4.1; Embree splits the
@@ -353,9 +390,10 @@ class SpatialBuilder {
       // chop_triangle_bounds, padded outward so each part is conservative), each part cut to
       // the reference's box.
       const Vec3 v[3] = {scene_.vertex(r.prim, 0), scene_.vertex(r.prim, 1), scene_.vertex(r.prim, 2)};
-      chop_triangle_bounds(v, A, ab.pl + b0, b1 - b0 + 1, r.box, sbox + b0);
+      chop_triangle_bounds(v, A, ab.pl + b0, b1 - b0 + 1, r.box, parts + b0);
     }
-    for (int b = 0; b < sbins_; ++b) bins[b].box.grow(sbox[b]);
+    for (int k = 0; k < sbins_; ++k)
+      bb[k].lo = grow_lo(bb[k].lo, load_vec3(parts[k].lo)), bb[k].hi = grow_hi(bb[k].hi, load_vec3(parts[k].hi));
   }
 
   // Distributes references for a spatial split; a straddling reference is split, or kept whole on
@@ -432,13 +470,18 @@ class SpatialBuilder {
   const size_t budget_;
   size_t used_ = 0;
   float root_area_ = 1.f;
-  std::vector<Bin> bins_;
-  std::vector<Bin> obins3_[3];  // object_split's bins per axis
+  std::vector<BinBox> obox_;  // object_split's bin boxes, [axis * obins_ + bin]
+  std::vector<uint32_t> ocount_;  // ... and counts
+  Float4 ocl_, osc_;  // object_split's centroid minimum and bin scale per axis
+  Split walls_;  // object_split's walls_apart candidate (kind none: not offered)
+  std::vector<Float4> cen_;  // object_split's centroids, in the order of the references
+  BinBox sbox_[kMaxChopSlabs];  // spatial_bins' bin boxes (references inside one bin, then parts)
+  uint32_t scount_[kMaxChopSlabs], sexit_[kMaxChopSlabs];  // ... entries and exits per bin
   AABB parts_[kMaxChopSlabs];  // spatial_bins' boxes of the chopped parts (sbins_ <= 256)
-  std::vector<Vec3> cen_;  // object_split's centroids
   std::vector<uint8_t> wall_;  // by triangle id: never clipped (empty: wall = 0)
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;
+  std::vector<BinBox> right_box_;
 };
 
 }  // namespace
