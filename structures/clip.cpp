@@ -1,5 +1,7 @@
 #include "structures/clip.h"
 
+#include "structures/box_simd.h"
+
 #include <algorithm>
 #include <bit>
 #include <limits>
@@ -177,8 +179,6 @@ void split_triangle_bounds(const Vec3 v[3], int axis, float pos, AABB& left, AAB
 // edge's own box (it lies on the edge), which is also the clamp for every crossing.
 namespace {
 
-inline __m128 load3(Vec3 v) { return _mm_setr_ps(v.x, v.y, v.z, 0.f); }
-
 // The sweep for one axis A, in SSE (a box is a (lo, hi) pair of 4-float registers). With the
 // vertices sorted along A (a0 <= a1 <= a2), a plane a0 < w < a2 is crossed strictly by the long
 // edge v0-v2 and by v0-v1 (w < a1) or v1-v2 (w > a1); at w = a1 the short edges meet it at v1, a
@@ -194,7 +194,7 @@ void chop_axis(const Vec3 v[3], const float* pl, int n, const AABB& clamp, AABB*
   if (v[o[1]][A] > v[o[2]][A]) std::swap(o[1], o[2]);
   if (v[o[0]][A] > v[o[1]][A]) std::swap(o[0], o[1]);
   const float a[3] = {v[o[0]][A], v[o[1]][A], v[o[2]][A]};
-  const __m128 P[3] = {load3(v[o[0]]), load3(v[o[1]]), load3(v[o[2]])};
+  const __m128 P[3] = {load_vec3(v[o[0]]), load_vec3(v[o[1]]), load_vec3(v[o[2]])};
   const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY), sign = _mm_set1_ps(-0.f);
   int slab[3];
   bool on[3];
@@ -232,7 +232,7 @@ void chop_axis(const Vec3 v[3], const float* pl, int n, const AABB& clamp, AABB*
     xl = _mm_min_ps(xl, _mm_blend_ps(_mm_max_ps(_mm_sub_ps(c, e.pad), e.lo), wv, kAxisLane));
     xh = _mm_max_ps(xh, _mm_blend_ps(_mm_min_ps(_mm_add_ps(c, e.pad), e.hi), wv, kAxisLane));
   };
-  const __m128 clo = load3(clamp.lo), chi = load3(clamp.hi);
+  const __m128 clo = load_vec3(clamp.lo), chi = load_vec3(clamp.hi);
   __m128 lo_l = inf, lo_h = ninf;  // crossings of slab i's lower plane (none for slab 0)
   for (int i = 0; i < n; ++i) {
     __m128 up_l = inf, up_h = ninf;  // crossings of its upper plane pl[i + 1] (none for the last)
@@ -251,11 +251,7 @@ void chop_axis(const Vec3 v[3], const float* pl, int n, const AABB& clamp, AABB*
     // Cut to the clamp box; a part left empty (lo > hi on some axis) grows nothing.
     bl = _mm_max_ps(bl, clo), bh = _mm_min_ps(bh, chi);
     if ((_mm_movemask_ps(_mm_cmple_ps(bl, bh)) & 7) != 7) continue;
-    alignas(16) float lf[4], hf[4];
-    _mm_store_ps(lf, _mm_min_ps(bl, load3(out[i].lo)));
-    _mm_store_ps(hf, _mm_max_ps(bh, load3(out[i].hi)));
-    out[i].lo = {lf[0], lf[1], lf[2]};
-    out[i].hi = {hf[0], hf[1], hf[2]};
+    out[i] = to_aabb(_mm_min_ps(bl, load_vec3(out[i].lo)), _mm_max_ps(bh, load_vec3(out[i].hi)));
   }
 }
 

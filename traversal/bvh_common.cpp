@@ -34,19 +34,19 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   p.split_wall = float(cfg.get_real("split_wall"));
   p.split_overlap = float(cfg.get_real("split_overlap"));
   p.split_walls = cfg.get_bool("split_walls");
-  // The split_* parameters steer the spatial-split build only; given a value other than their
-  // default without it they would change nothing, so they are refused (every option either works
-  // or is refused).
-  auto number = [](const ParamSpec& spec, const std::string& v) {
-    return spec.type == ParamType::boolean ? double(param_to_bool(v)) : param_to_real(v);
-  };
+  // The split_* parameters steer the spatial-split build only; a value other than their default
+  // (what the resolved config holds when the user gave none) would change nothing without it, so
+  // it is refused (every option either works or is refused).
   if (!p.spatial && cfg.declared)
-    for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"})
-      if (const ParamSpec* spec = find_param(*cfg.declared, key);
-          cfg.given(key) && number(*spec, cfg.params.at(key)) != number(*spec, spec->fallback))
+    for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"}) {
+      const ParamSpec& spec = *find_param(*cfg.declared, key);
+      const bool changed = spec.type == ParamType::boolean ? cfg.get_bool(key) != param_to_bool(spec.fallback)
+                                                          : cfg.get_real(key) != param_to_real(spec.fallback);
+      if (changed)
         throw InputError(std::string("parameter '") + key +
                          "' only applies to spatial-split builds, and this scheme builds without them (spatial=0): "
                          "add --param spatial=1 or drop " + key);
+    }
   return p;
 }
 

@@ -101,8 +101,8 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
  public:
   explicit CWBVHSingle(const SchemeConfig& cfg)
       : cfg_(cfg), params_(mbvh_params(cfg, kDefaults)), order_(parse_order_param(cfg.get_choice("order"))) {
-    if (params_.merge > 16) throw InputError("cwbvh_single: merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
-    if (params_.bvh.max_leaf > 16) throw InputError("cwbvh_single: leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+    if (params_.merge > 16) throw InputError("merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
+    if (params_.bvh.max_leaf > 16) throw InputError("leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
   }
   std::string_view name() const override { return "cwbvh_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {

@@ -72,7 +72,6 @@ SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg) {
     if (!spec) unknown_param(key, names_of(info.params), "scheme " + name);
     spec->check(value);
     resolved.params[key] = value;
-    resolved.user_keys.insert(key);
   }
   for (const auto& spec : info.params)
     if (!spec.fallback.empty()) resolved.params.emplace(spec.name, spec.fallback);

@@ -9,7 +9,6 @@
 #include <map>
 #include <memory>
 #include <optional>
-#include <set>
 #include <span>
 #include <string>
 #include <string_view>
@@ -42,10 +41,6 @@ struct SchemeConfig {
   // For parameters whose default depends on others (ParamSpec::fallback empty): nullopt when not given.
   std::optional<int> find_int(const std::string& key) const;
   std::optional<std::string> find_choice(const std::string& key) const;
-  // Whether the user gave `key` (make_scheme fills in defaults; a parameter that only matters when
-  // another one has some value is refused, not ignored, when given without it: bvh_params).
-  bool given(const std::string& key) const { return user_keys.count(key) != 0; }
-  std::set<std::string> user_keys;
 
  private:
   const std::string* value(const std::string& key) const;
