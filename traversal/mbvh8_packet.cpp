@@ -406,7 +406,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
               __m256 tn;
               const __m256 in = child_test(g, nd, c, act, tn);
               if (_mm256_testz_ps(in, in)) continue;
-              if (j > 0) prefetch_ref(m, nd.ref[c]);
+              prefetch_any(m, nd.ref[c]);
               push(stack, sp, _mm256_blendv_ps(inf, tn, in), nd.ref[c], probe);
             }
           } else {
