@@ -195,6 +195,9 @@ int main(int argc, char** argv) {
   bool resume = false;
   run->add_flag("--resume", resume,
                 "keep the cells --csv holds from an interrupted run of the same sweep and measure only the rest");
+  run->add_flag("--interleave", ro.interleave,
+                "time each workload's schemes round by round (--reps rounds, every scheme once a round, the order "
+                "rotated) and add speed_ratio columns: each round's speed over the first scheme's");
 
   std::string table_name;
   auto* table = app.add_subcommand("table", "Reproduce a thesis table -> CSV + terminal table");
@@ -335,6 +338,8 @@ int main(int argc, char** argv) {
       for (std::string w; std::getline(ss, w, ',');)
         if (!w.empty()) ro.workloads.push_back(parse_workload(w).name());
       if (ro.workloads.empty()) throw InputError("--workloads is empty");
+      if (ro.interleave && resume)
+        throw InputError("--interleave times a workload's schemes together: it cannot --resume a run that kept some");
       run_sweep(bench, ro, scene_arg, csv_path, resume);
       std::fprintf(stderr, "wrote %s\n", csv_path.c_str());
       return 0;

@@ -1,5 +1,6 @@
 #include "harness/experiment.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <thread>
@@ -133,15 +134,56 @@ Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& b
   // Every repetition's Mrays/s in run order, for `travbench compare`'s Mann-Whitney U test, and
   // the scheme's parameters as the run gave them, so cells of runs with different parameters
   // never match.
-  std::string samples;
-  for (double sec : tp.seconds) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%s%.6g", samples.empty() ? "" : ";", double(batch.size()) / std::max(sec, 1e-9) * 1e-6);
-    samples += buf;
-  }
+  std::vector<double> mrays;
+  for (double sec : tp.seconds) mrays.push_back(double(batch.size()) / std::max(sec, 1e-9) * 1e-6);
+  const std::string samples = samples_text(mrays);
   r.set("mrays_samples", samples).set("params", params_text(std::string(scheme.name()), opt.scheme_config));
   return r;
 }
+
+std::string samples_text(const std::vector<double>& mrays) {
+  std::string samples;
+  for (double v : mrays) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%s%.6g", samples.empty() ? "" : ";", v);
+    samples += buf;
+  }
+  return samples;
+}
+
+namespace {
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+}  // namespace
+
+void set_interleaved_speed(Record& r, const std::vector<double>& sec, const std::vector<double>& base_sec, size_t rays,
+                           const std::string& base) {
+  std::vector<double> mrays, ratio;
+  for (size_t k = 0; k < sec.size(); ++k) {
+    mrays.push_back(double(rays) / std::max(sec[k], 1e-9) * 1e-6);
+    ratio.push_back(base_sec[k] / std::max(sec[k], 1e-9));
+  }
+  r.set("reps", int(sec.size()))
+      .set("mrays_median", median_of(mrays))
+      .set("mrays_min", *std::min_element(mrays.begin(), mrays.end()))
+      .set("mrays_max", *std::max_element(mrays.begin(), mrays.end()))
+      .set("mrays_samples", samples_text(mrays))
+      .set("speed_base", base)
+      .set("speed_ratio_median", median_of(ratio))
+      .set("speed_ratio_min", *std::min_element(ratio.begin(), ratio.end()))
+      .set("speed_ratio_max", *std::max_element(ratio.begin(), ratio.end()));
+}
+
+namespace {
+// A run's row names the scheme entry as given (embree_single:robust=0 and embree_single are two
+// rows) and the parameters it ran with, its own included.
+void label_entry(Record& r, const std::string& entry, const RunOptions& opt, double prepare_ms) {
+  r.set("scheme", entry).set("params", params_text(entry, opt.scheme_config)).set("prepare_ms", prepare_ms);
+}
+}  // namespace
 
 std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
   std::vector<Record> out;
@@ -165,8 +207,33 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
     spec.height = opt.height;
     spec.view = opt.view;
     spec.seed = opt.seed;
+    if (opt.interleave) {  // every scheme of this workload at once (apps refuse --resume with it)
+      RunOptions once = cell_opt;
+      once.reps = 1;  // accuracy, --stats and --cache per cell; the timing is the rounds below
+      std::vector<Record> rows;
+      std::vector<const Traverser*> ts;
+      for (size_t s = 0; s < schemes.size(); ++s) {
+        rows.push_back(measure_cell(bench, spec, *schemes[s], once));
+        label_entry(rows.back(), opt.schemes[s], opt, prepare_ms[s]);
+        ts.push_back(schemes[s].get());
+      }
+      const RayBatch& batch = bench.rays(spec);
+      std::vector<Hit> hits(batch.size());
+      const auto sec = measure_interleaved(ts, batch, hits, opt.threads, opt.reps);
+      for (size_t s = 0; s < schemes.size(); ++s) {
+        set_interleaved_speed(rows[s], sec[s], sec[0], batch.size(), opt.schemes[0]);
+        if (opt.cells) opt.cells->append(rows[s]);
+        if (opt.progress)
+          std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %8s Mrays/s  %s x %s  mismatch %s\n", ++done, total,
+                       opt.schemes[s].c_str(), spec.name().c_str(), rows[s].get("mrays_median")->c_str(),
+                       rows[s].get("speed_ratio_median")->c_str(), opt.schemes[0].c_str(),
+                       rows[s].get("mismatch_rate")->c_str());
+        out.push_back(std::move(rows[s]));
+      }
+      continue;
+    }
     for (size_t s = 0; s < schemes.size(); ++s) {
-      const std::string name(schemes[s]->name());
+      const std::string& name = opt.schemes[s];  // the entry, with its own parameters if any
       if (opt.cells && opt.cells->has(cell_key(spec.name(), name, std::string(kernel_name(opt.scheme_config.kernel)),
                                                std::to_string(opt.view + 1), params_text(name, opt.scheme_config)))) {
         if (opt.progress)
@@ -175,11 +242,11 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
         continue;
       }
       Record r = measure_cell(bench, spec, *schemes[s], cell_opt);
-      r.set("prepare_ms", prepare_ms[s]);
+      label_entry(r, name, opt, prepare_ms[s]);
       if (opt.cells) opt.cells->append(r);
       if (opt.progress)
         std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %8s Mrays/s  mismatch %s\n", ++done, total,
-                     schemes[s]->name().data(), spec.name().c_str(), r.get("mrays_median")->c_str(),
+                     name.c_str(), spec.name().c_str(), r.get("mrays_median")->c_str(),
                      r.get("mismatch_rate")->c_str());
       out.push_back(std::move(r));
     }

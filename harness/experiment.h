@@ -26,6 +26,10 @@ struct RunOptions {
   uint64_t seed = 1;
   SchemeConfig scheme_config;
   bool progress = true;
+  // Time each workload's schemes round by round (measure_interleaved, `reps` rounds) instead of one
+  // scheme's repetitions after another's; adds speed_base (the first scheme) and
+  // speed_ratio_median/_min/_max, the per-round speed ratios to it (set_interleaved_speed).
+  bool interleave = false;
   // Where each finished cell goes as it completes (harness/sweep.h); measure_cell appends to it
   // (the tables' cells), run_experiment appends its rows itself and skips the cells it holds.
   CellStream* cells = nullptr;
@@ -68,6 +72,14 @@ std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, in
 // With opt.cells, a cell the stream already holds (a resumed sweep) is not measured again, and the
 // result is the stream's rows (the resumed ones first).
 std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt);
+// A cell's speed from interleaved rounds (measure_interleaved): reps = the rounds, mrays_median,
+// _min, _max and mrays_samples over them, and per round the ratio to `base`, the scheme whose trace
+// took base_sec in the same rounds: speed_base, speed_ratio_median, _min, _max (a ratio of one
+// round compares two traces seconds apart, not two runs minutes apart).
+void set_interleaved_speed(Record& r, const std::vector<double>& sec, const std::vector<double>& base_sec, size_t rays,
+                           const std::string& base);
+// Mrays/s values as the mrays_samples column writes them (';'-separated, run order).
+std::string samples_text(const std::vector<double>& mrays);
 // The `params` column: the scheme's parameters as the run gave them (its declared keys only).
 std::string params_text(const std::string& scheme, const SchemeConfig& cfg);
 

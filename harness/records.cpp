@@ -1,6 +1,7 @@
 #include "harness/records.h"
 
 #include <fcntl.h>
+#include <sched.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -89,6 +90,25 @@ std::string transparent_hugepages() {
   return a != std::string::npos && b != std::string::npos && b > a ? line.substr(a + 1, b - a - 1) : line;
 }
 
+// The CPUs the process may run on (its affinity, e.g. "1" under `taskset -c 1`, "0-1" unpinned):
+// on a shared VM one core can be slowed by another tenant on its caches while the other is not,
+// and cache-bound schemes (the ray streams) suffer more than the rest, so a timing records where
+// it ran (docs/PERFORMANCE.md, session 20).
+std::string cpu_affinity() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) != 0) return "unavailable";
+  std::string out;
+  for (int c = 0; c < CPU_SETSIZE; ++c) {
+    if (!CPU_ISSET(c, &set)) continue;
+    int e = c;
+    while (e + 1 < CPU_SETSIZE && CPU_ISSET(e + 1, &set)) ++e;
+    out += (out.empty() ? "" : ",") + std::to_string(c) + (e > c ? "-" + std::to_string(e) : "");
+    c = e;
+  }
+  return out;
+}
+
 }  // namespace
 
 nlohmann::json provenance() {
@@ -99,6 +119,7 @@ nlohmann::json provenance() {
   return {{"cpu", cpu.name},
           {"cpu_id", cpu.id},
           {"hardware_threads", std::thread::hardware_concurrency()},
+          {"cpu_affinity", cpu_affinity()},
           {"compiler", std::string("g++ ") + __VERSION__},
           {"flags", TRAVBENCH_CXX_FLAGS},
           {"embree_version", TRAVBENCH_EMBREE_VERSION},

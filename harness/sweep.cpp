@@ -208,6 +208,7 @@ std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& s
                                {"kernel", std::string(kernel_name(opt.scheme_config.kernel))},
                                {"params", opt.scheme_config.params},
                                {"stats", opt.stats},
+                               {"interleave", opt.interleave},
                                {"cache", opt.cache ? opt.cache_config + " " + opt.cache_policy : ""}};
   // Schemes and workloads may differ: a resume may finish a sweep or extend it by more cells.
   CellStream stream(csv, meta, resume,

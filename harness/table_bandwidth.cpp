@@ -17,23 +17,11 @@
 
 namespace tb {
 
-namespace {
 
-double median_of(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-}  // namespace
-
-// Speed, interleaved: the schemes are timed in the same process, round by round (each round
-// traces the whole batch once with every scheme, the order rotated by one each round, after one
-// warm-up trace each), so a shared machine's slow phases fall on all schemes alike. Per cell the
-// median, min and max Mrays/s over the rounds (mrays_median, _min, _max, mrays_samples; `reps` =
-// rounds), and per round the speed ratio to the first scheme of the table (mbvh8_single by
-// default): speed_ratio_median, _min, _max, the ratio columns to read (a ratio of one round is
-// two traces seconds apart, not two runs minutes apart).
+// Speed, interleaved (measure_interleaved: --reps rounds, every scheme once per round, as `run
+// --interleave` times them): per cell the Mrays/s over the rounds and the per-round speed ratio
+// to the first scheme of the table (mbvh8_single by default), speed_ratio_median, _min, _max, the
+// ratio columns to read (set_interleaved_speed).
 int bandwidth_table(const TableOptions& opt) {
   Bench bench(load_scene(table_scene(opt)));
   RunOptions run = opt.run;
@@ -65,39 +53,16 @@ int bandwidth_table(const TableOptions& opt) {
   for (size_t w = 0; w < workloads.size(); ++w) {
     const RayBatch& batch = bench.rays(table_spec(opt, workloads[w], run.view));
     std::vector<Hit> hits(batch.size());
-    for (auto& t : schemes) trace_batch(*t, batch, hits, run.threads);  // warm-up
-    std::vector<std::vector<double>> sec(schemes.size());
-    for (int round = 0; round < rounds; ++round)
-      for (size_t k = 0; k < schemes.size(); ++k) {
-        const size_t s = (size_t(round) + k) % schemes.size();
-        const auto t0 = std::chrono::steady_clock::now();
-        trace_batch(*schemes[s], batch, hits, run.threads);
-        sec[s].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-      }
+    std::vector<const Traverser*> ts;
+    for (auto& t : schemes) ts.push_back(t.get());
+    const auto sec = measure_interleaved(ts, batch, hits, run.threads, rounds);
     for (size_t s = 0; s < schemes.size(); ++s) {
       Record& r = records[s * workloads.size() + w];
-      std::vector<double> mrays, ratio;
-      std::string samples;
-      for (int k = 0; k < rounds; ++k) {
-        mrays.push_back(double(batch.size()) / std::max(sec[s][k], 1e-9) * 1e-6);
-        ratio.push_back(sec[0][k] / std::max(sec[s][k], 1e-9));
-        char buf[32];
-        std::snprintf(buf, sizeof buf, "%s%.6g", samples.empty() ? "" : ";", mrays.back());
-        samples += buf;
-      }
-      r.set("reps", rounds)
-          .set("mrays_median", median_of(mrays))
-          .set("mrays_min", *std::min_element(mrays.begin(), mrays.end()))
-          .set("mrays_max", *std::max_element(mrays.begin(), mrays.end()))
-          .set("mrays_samples", samples)
-          .set("speed_base", names[0])
-          .set("speed_ratio_median", median_of(ratio))
-          .set("speed_ratio_min", *std::min_element(ratio.begin(), ratio.end()))
-          .set("speed_ratio_max", *std::max_element(ratio.begin(), ratio.end()));
+      set_interleaved_speed(r, sec[s], sec[0], batch.size(), names[0]);
       std::fprintf(stderr, "%-14s %-9s %7s B/node  %10s node bytes  %8.2f memory reads/ray  %8.4g Mrays/s  %.3fx %s\n",
                    names[s].c_str(), workloads[w].c_str(), r.get("bytes_per_node")->c_str(),
-                   r.get("node_bytes")->c_str(), std::stod(*r.get("mem_reads_per_ray")), median_of(mrays),
-                   median_of(ratio), names[0].c_str());
+                   r.get("node_bytes")->c_str(), std::stod(*r.get("mem_reads_per_ray")),
+                   std::stod(*r.get("mrays_median")), std::stod(*r.get("speed_ratio_median")), names[0].c_str());
     }
   }
   write_csv(opt.csv, records,

@@ -44,6 +44,20 @@ void trace_batch(const Traverser& t, const RayBatch& batch, std::span<Hit> hits,
   for (auto& th : pool) th.join();
 }
 
+std::vector<std::vector<double>> measure_interleaved(std::span<const Traverser* const> schemes, const RayBatch& batch,
+                                                     std::span<Hit> hits, int threads, int rounds) {
+  for (const Traverser* t : schemes) trace_batch(*t, batch, hits, threads);  // warm-up
+  std::vector<std::vector<double>> sec(schemes.size());
+  for (int round = 0; round < rounds; ++round)
+    for (size_t k = 0; k < schemes.size(); ++k) {
+      const size_t s = (size_t(round) + k) % schemes.size();
+      const auto t0 = std::chrono::steady_clock::now();
+      trace_batch(*schemes[s], batch, hits, threads);
+      sec[s].push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+  return sec;
+}
+
 ThroughputStats measure(const Traverser& t, const RayBatch& batch, std::span<Hit> hits, int threads, int reps) {
   ThroughputStats s;
   trace_batch(t, batch, hits, threads);  // warm-up: caches, page faults, lazy allocations

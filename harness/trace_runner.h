@@ -22,4 +22,11 @@ struct ThroughputStats {
 // One untimed warm-up, then `reps` timed runs of the whole batch.
 ThroughputStats measure(const Traverser& t, const RayBatch& batch, std::span<Hit> hits, int threads, int reps);
 
+// Several schemes on one batch, interleaved: one warm-up trace each, then `rounds` rounds that each
+// trace the batch once with every scheme, the order rotated by one per round, so a shared machine's
+// slow phases (another tenant on the core's caches, a frequency change) fall on every scheme alike.
+// Returns each scheme's seconds per round: sec[scheme][round]. `hits` receives the last trace's.
+std::vector<std::vector<double>> measure_interleaved(std::span<const Traverser* const> schemes, const RayBatch& batch,
+                                                     std::span<Hit> hits, int threads, int rounds);
+
 }  // namespace tb

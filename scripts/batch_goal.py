@@ -6,11 +6,13 @@ rtcIntersect8 streams (embree_stream; goal >= 1.0x everywhere).
 
 Usage:
   /usr/bin/python3 scripts/batch_goal.py [--rounds 3] [--scenes S,S,...] [--param KEY=VALUE ...]
-      [--out /tmp/batch_goal] [--markdown]
+      [--cpu N] [--out /tmp/batch_goal] [--markdown]
 
-Each round runs, per scene in turn, one `travbench run --schemes mbvh8_single,mbvh4_single,mbvh_rs,
-raygrid,embree_stream,embree_single --workloads bounce:3` process (512x512, 1 thread), so every
-ratio is of one process and a scene's rounds are spread over the whole measurement. A scene whose
+Each round runs, per scene in turn, one `travbench run --interleave --schemes mbvh8_single,mbvh4_single,
+mbvh_rs,raygrid,embree_stream,embree_single --workloads bounce:3` process (512x512, 1 thread; the
+schemes timed round by round, --reps rounds), so every ratio is of one process and the same minutes
+of the machine, and a scene's rounds are spread over the whole measurement. `--cpu N` pins the
+processes to CPU N (see single_ray_goal.py). A scene whose
 bounce:3 batch holds fewer than --small rays (the scanned models: ~5000 rays, a trace of 2 ms) is
 re-run at once with --small-reps repetitions, and that run is the round's. Printed per scene: the
 median (min-max) over the rounds of each ratio. The CSVs stay in --out. Use 3 or more rounds on an
@@ -18,11 +20,10 @@ idle machine: timings on a shared machine move by several percent.
 """
 import argparse
 import os
-import statistics
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from single_ray_goal import ROOT, default_scenes, run  # noqa: E402
+from single_ray_goal import ROOT, default_scenes, fmt_rounds, print_table, run, scene_label  # noqa: E402
 
 SCHEMES = "mbvh8_single,mbvh4_single,mbvh_rs,raygrid,embree_stream,embree_single"
 BATCH, SINGLE = ("mbvh_rs", "raygrid"), ("mbvh8_single", "mbvh4_single", "embree_single")
@@ -44,6 +45,7 @@ def main():
     ap.add_argument("--size", type=int, default=512, help="image width and height")
     ap.add_argument("--scenes", default=",".join(default_scenes() + ["room"]))
     ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
+    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
     ap.add_argument("--out", default="/tmp/batch_goal")
     ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                     help="a scheme parameter for every run (repeatable), e.g. task_order=sum")
@@ -72,22 +74,18 @@ def main():
             c[2].append(batch)
             print(f"round {r}: {s} done", file=sys.stderr)
 
-    def fmt(v):
-        return f"{statistics.median(v):.3f} ({min(v):.2f}-{max(v):.2f})"
-
     head = ["scene", "best batch / best single (>= 1.3 on the architectural scenes)", "best batch / embree_stream (>= 1.0)",
             "best batch (rounds)"]
     print(f"# {args.rounds} rounds, bounce:3, {args.size}x{args.size}, --reps {args.reps} ({args.small_reps} under "
-          f"{args.small} rays){''.join(' --param ' + p for p in args.param)}; median (min-max) over the rounds")
-    if args.markdown:
-        print("| " + " | ".join(head) + " |")
-        print("|" + "---|" * len(head))
+          f"{args.small} rays) interleaved, cpu {'any' if args.cpu is None else args.cpu}"
+          f"{''.join(' --param ' + p for p in args.param)}; median (min-max) over the rounds")
+    rows = []
     for s, (single, stream, which) in cells.items():
-        name = os.path.basename(s).rsplit(".", 1)[0] if os.path.sep in s else s
+        name = scene_label(s)
         best = ", ".join(f"{k} {which.count(k)}" for k in BATCH if k in which)
-        vals = [name + (" (architectural)" if name in ARCHITECTURAL and not args.markdown else ""), fmt(single),
-                fmt(stream), best]
-        print("| " + " | ".join(vals) + " |" if args.markdown else "  ".join(f"{v:<28}" for v in vals))
+        rows.append([name + (" (architectural)" if name in ARCHITECTURAL and not args.markdown else ""),
+                     fmt_rounds(single), fmt_rounds(stream), best])
+    print_table(head, rows, args.markdown)
 
 
 if __name__ == "__main__":

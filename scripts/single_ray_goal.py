@@ -6,18 +6,19 @@ which Embree builds spatial splits).
 
 Usage:
   /usr/bin/python3 scripts/single_ray_goal.py [--rounds 3] [--isa default|avx2] [--scenes S,S,...]
-      [--ours mbvh8_single[,cwbvh_single,...]] [--out /tmp/single_ray_goal] [--markdown]
+      [--ours mbvh8_single[,cwbvh_single,...]] [--cpu N] [--out /tmp/single_ray_goal] [--markdown]
 
-Each round runs, per scene in turn, two `travbench run` processes back to back:
-  A: --schemes <ours>,embree_single                  (one process: their ratio is of one run)
-  B: --schemes embree_single --param robust=0         (Embree HIGH fast)
-so a scene's rounds are spread over the whole measurement. Per round and cell:
-  ours / embree_single                  from A alone,
-  Embree fast / embree_single           B's embree_single over A's (adjacent processes),
-  ours / Embree fast                    A's ours over B's,
-where ours is the fastest of the --ours schemes in that round and cell (the goal's "best single";
-the last column names each one's wins). Printed: the median (min-max) over the rounds. `--isa avx2` asks Embree for its AVX2 kernels (the
-reference machine's ISA) in both processes; the default is Embree's run-time choice. The CSVs stay in
+Each round runs, per scene in turn, one `travbench run --interleave` process:
+  --schemes <ours>,embree_single,embree_single:robust=0
+(Embree HIGH robust and HIGH fast side by side: a scheme entry with a parameter of its own), whose
+schemes are timed round by round (--reps rounds, every scheme once a round), so every ratio is of
+one process and the same minutes of the machine. Per round and cell: ours / embree_single, Embree
+fast / embree_single and ours / Embree fast, where ours is the fastest of the --ours schemes in that
+round and cell (the goal's "best single"; the last column names each one's wins). Printed: the
+median (min-max) over the rounds. `--isa avx2` asks Embree for its AVX2 kernels (the reference
+machine's ISA); the default is Embree's run-time choice. `--cpu N` pins every process to CPU N
+(taskset): on a shared VM one core can be slowed by another tenant on its caches while the other is
+not (docs/PERFORMANCE.md, session 20); the sidecars record the affinity. The CSVs stay in
 --out. Timings on a shared machine move by several percent: use 3 or more rounds on an idle machine.
 """
 import argparse
@@ -46,9 +47,11 @@ def scene_arg(name):
 
 
 def run(travbench, scene, schemes, params, args, csv_path):
-    cmd = [travbench, "run", "--scene", scene_arg(scene), "--schemes", schemes, "--workloads", args.workloads,
-           "--width", str(args.size), "--height", str(args.size), "--reps", str(args.reps), "--threads", "1",
-           "--csv", csv_path]
+    """One `travbench run --interleave` process (pinned to --cpu when given): {(workload, scheme entry): Mrays/s}."""
+    cmd = (["taskset", "-c", str(args.cpu)] if getattr(args, "cpu", None) is not None else []) + [
+        travbench, "run", "--scene", scene_arg(scene), "--schemes", schemes, "--workloads", args.workloads,
+        "--width", str(args.size), "--height", str(args.size), "--reps", str(args.reps), "--threads", "1",
+        "--interleave", "--csv", csv_path]
     for p in params:
         cmd += ["--param", p]
     res = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -57,6 +60,25 @@ def run(travbench, scene, schemes, params, args, csv_path):
     with open(csv_path) as f:
         rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
     return {(r["workload"], r["scheme"]): float(r["mrays_median"]) for r in rows}
+
+
+def fmt_rounds(v):
+    """A cell of a goal table: the median (min-max) of its per-round ratios."""
+    return f"{statistics.median(v):.3f} ({min(v):.2f}-{max(v):.2f})"
+
+
+def scene_label(s):
+    """A scene's name in a table: the file's stem for a path, else the name itself."""
+    return os.path.basename(s).rsplit(".", 1)[0] if os.path.sep in s else s
+
+
+def print_table(head, rows, markdown):
+    """A goal table: markdown, or columns padded to 28 characters."""
+    if markdown:
+        print("| " + " | ".join(head) + " |")
+        print("|" + "---|" * len(head))
+    for vals in rows:
+        print("| " + " | ".join(vals) + " |" if markdown else "  ".join(f"{v:<28}" for v in vals))
 
 
 def main():
@@ -70,6 +92,7 @@ def main():
     ap.add_argument("--ours", default="mbvh8_single",
                     help="travbench single-ray schemes; per round and cell the fastest is ours")
     ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
+    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
     ap.add_argument("--out", default="/tmp/single_ray_goal")
     ap.add_argument("--markdown", action="store_true", help="print a markdown table")
     args = ap.parse_args()
@@ -88,11 +111,11 @@ def main():
     for r in range(1, args.rounds + 1):
         for s in scenes:
             tag = s.replace("/", "_").replace(":", "_")
-            a = run(args.travbench, s, args.ours + ",embree_single", isa, args, f"{args.out}/{tag}_A_{r}.csv")
-            b = run(args.travbench, s, "embree_single", ["robust=0"] + isa, args, f"{args.out}/{tag}_B_{r}.csv")
+            a = run(args.travbench, s, args.ours + ",embree_single,embree_single:robust=0", isa, args,
+                    f"{args.out}/{tag}_{r}.csv")
             for w in workloads:
                 best = max(ours_schemes, key=lambda k: a[(w, k)])
-                ours, robust, fast = a[(w, best)], a[(w, "embree_single")], b[(w, "embree_single")]
+                ours, robust, fast = a[(w, best)], a[(w, "embree_single")], a[(w, "embree_single:robust=0")]
                 c = cells.setdefault((s, w), ([], [], [], {}))
                 c[3][best] = c[3].get(best, 0) + 1
                 c[0].append(ours / robust)
@@ -100,19 +123,16 @@ def main():
                 c[2].append(ours / fast)
             print(f"round {r}: {s} done", file=sys.stderr)
 
-    def fmt(v):
-        return f"{statistics.median(v):.3f} ({min(v):.2f}-{max(v):.2f})"
-
     ours_name = ours_schemes[0] if len(ours_schemes) == 1 else "best single"
     head = ["scene", "workload", f"{ours_name} / embree_single", "Embree HIGH fast / embree_single",
             f"{ours_name} / Embree HIGH fast"] + (["fastest (rounds)"] if len(ours_schemes) > 1 else [])
-    print(f"# {args.rounds} rounds, {args.size}x{args.size}, --reps {args.reps}, Embree isa={args.isa}; "
-          "median (min-max) over the rounds")
+    print(f"# {args.rounds} rounds, {args.size}x{args.size}, --reps {args.reps} interleaved, Embree isa={args.isa}, "
+          f"cpu {'any' if args.cpu is None else args.cpu}; median (min-max) over the rounds")
     if args.markdown:
         print("| " + " | ".join(head) + " |")
         print("|" + "---|" * len(head))
     for (s, w), (o, f, of, wins) in cells.items():
-        vals = [s, w, fmt(o), fmt(f), fmt(of)]
+        vals = [s, w, fmt_rounds(o), fmt_rounds(f), fmt_rounds(of)]
         if len(ours_schemes) > 1:
             vals.append(" ".join(f"{k} {n}" for k, n in sorted(wins.items(), key=lambda kv: -kv[1])))
         print("| " + " | ".join(vals) + " |" if args.markdown else f"{s:<24}{w:<10}" + "  ".join(f"{v:>22}" for v in vals[2:]))

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <regex>
+#include <map>
 #include <set>
 #include <thread>
 
@@ -306,6 +307,48 @@ TEST(CLI, ProvenanceNamesTheRevisionAndThePageSetting) {
 void expect_says(const Result& r, int code, const std::string& needle) {
   EXPECT_EQ(r.code, code) << r.out;
   EXPECT_NE(r.out.find(needle), std::string::npos) << r.out;
+}
+
+// `run --interleave` times each workload's schemes round by round in one process: every row has
+// --reps samples, and its speed_ratio columns are the per-round ratios to the first scheme (1 for
+// that scheme itself, and the median of the ratios lies within their min and max); the sidecar
+// says the run was interleaved. Resuming such a run is refused (its cells are timed together).
+// The same scheme twice, once with a parameter of its own (NAME:KEY=VALUE), gives two rows.
+TEST(CLI, InterleavedRunGivesPerRoundRatiosToTheFirstScheme) {
+  const auto dir = test::temp_dir("cli_interleave");
+  const std::string csv = (dir / "i.csv").string();
+  const std::string sweep = "run --scene sphere --schemes mbvh8_single,bvh_single,bvh_single:leaf_size=1 --workloads "
+                            "primary,bounce:1 --width 32 --height 32 --reps 3 --interleave --csv " + csv;
+  const Result r = travbench(sweep);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::vector<std::string> lines = lines_of(csv);
+  ASSERT_EQ(lines.size(), 7u);
+  std::vector<std::string> head;
+  std::stringstream hs(lines[0]);
+  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::map<std::string, std::string> row;
+    std::stringstream rs(lines[i]);
+    size_t c = 0;
+    for (std::string v; std::getline(rs, v, ',') && c < head.size(); ++c) row[head[c]] = v;
+    EXPECT_EQ(row["reps"], "3") << lines[i];
+    EXPECT_EQ(std::count(row["mrays_samples"].begin(), row["mrays_samples"].end(), ';'), 2) << lines[i];
+    EXPECT_EQ(row["speed_base"], "mbvh8_single") << lines[i];
+    const double med = std::stod(row["speed_ratio_median"]), lo = std::stod(row["speed_ratio_min"]),
+                 hi = std::stod(row["speed_ratio_max"]);
+    EXPECT_GT(lo, 0.0) << lines[i];
+    EXPECT_LE(lo, med) << lines[i];
+    EXPECT_LE(med, hi) << lines[i];
+    if (row["scheme"] == "mbvh8_single") EXPECT_EQ(med, 1.0) << lines[i];
+    // A scheme entry with parameters of its own is a row of its own, naming them.
+    EXPECT_EQ(row["params"], row["scheme"] == "bvh_single:leaf_size=1" ? "leaf_size=1" : "") << lines[i];
+    EXPECT_EQ(row["mismatch_rate"], "0") << lines[i];
+  }
+  std::ifstream js((dir / "i.json").string());
+  const nlohmann::json meta = nlohmann::json::parse(js);
+  EXPECT_EQ(meta.at("interleave"), true);
+  expect_says(travbench(sweep + " --resume"), 2, "--interleave");
+  std::filesystem::remove_all(dir);
 }
 
 // A table streams its measured cells too: killed after the first, its CSV holds whole rows under

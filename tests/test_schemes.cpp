@@ -242,6 +242,28 @@ TEST(Registry, RunParametersNeedOneSchemeOfTheRunThatDeclaresThem) {
   EXPECT_THROW(check_run_params({"raygrid"}, c, sweep), InputError);
 }
 
+// A scheme entry NAME:KEY=VALUE[:KEY=VALUE...] carries parameters of its own: they override the
+// run's for that entry alone, are checked against what the scheme declares, and the entry makes
+// the registered scheme (so one run can hold embree_single and embree_single:robust=0).
+TEST(Registry, SchemeEntriesCarryTheirOwnParameters) {
+  SchemeConfig run;
+  run.params = {{"leaf_size", "8"}, {"robust", "1"}};
+  const SchemeConfig e = config_for("embree_single:robust=0", run);
+  EXPECT_EQ(e.params, (std::map<std::string, std::string>{{"robust", "0"}}));
+  const SchemeConfig b = config_for("bvh_single:leaf_size=2:bins=8", run);
+  EXPECT_EQ(b.params, (std::map<std::string, std::string>{{"bins", "8"}, {"leaf_size", "2"}}));
+  EXPECT_EQ(scheme_name_of("bvh_single:leaf_size=2"), "bvh_single");
+  EXPECT_EQ(make_scheme("bvh_single:leaf_size=2")->name(), "bvh_single");
+  EXPECT_EQ(resolve_config("bvh_single:leaf_size=2", {}).params.at("leaf_size"), "2");
+  EXPECT_EQ(expand_scheme_list("embree_single,embree_single:robust=0"),
+            (std::vector<std::string>{"embree_single", "embree_single:robust=0"}));
+  EXPECT_THROW(check_run_params({"bvh_single:leaf_size=2"}, run), InputError);  // robust: only Embree's
+  EXPECT_NO_THROW(check_run_params({"bvh_single:leaf_size=2", "embree_single:robust=0"}, run));
+  for (const char* bad : {"bvh_single:robust=0", "embree_single:robust=2", "embree_single:robust", "embree_single:=1",
+                          "embree_single:", "embree_singl:robust=0"})
+    EXPECT_THROW(expand_scheme_list(bad), InputError) << bad;
+}
+
 TEST(Registry, ResolvedConfigHoldsDefaultsAndRefusesUndeclaredReads) {
   const SchemeConfig c = resolve_config("bvh_single", {});
   EXPECT_EQ(c.get_int("leaf_size"), BVHBuildParams{}.max_leaf);

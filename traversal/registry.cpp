@@ -21,7 +21,10 @@ const std::vector<SchemeInfo>& schemes() {
   return list;
 }
 
-const SchemeInfo& find_scheme(const std::string& name) {
+std::string scheme_name_of(const std::string& entry) { return entry.substr(0, entry.find(':')); }
+
+const SchemeInfo& find_scheme(const std::string& entry) {
+  const std::string name = scheme_name_of(entry);
   std::vector<std::string> known;
   for (const auto& s : schemes()) {
     if (s.name == name) return s;
@@ -59,8 +62,10 @@ std::unique_ptr<Traverser> make_scheme(const std::string& name, const SchemeConf
   }
 }
 
-SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg) {
+SchemeConfig resolve_config(const std::string& name, const SchemeConfig& given) {
   const SchemeInfo& info = find_scheme(name);
+  SchemeConfig cfg = given;  // with the entry's own parameters, if `name` carries any
+  for (const auto& [key, value] : config_for(name, SchemeConfig{}).params) cfg.params[key] = value;
   if (!info.kernels && cfg.kernel != TriKernel::watertight)
     throw InputError("scheme '" + name + "' has its own triangle test and does not take --kernel " +
                      std::string(kernel_name(cfg.kernel)));
@@ -96,12 +101,26 @@ void check_run_params(const std::vector<std::string>& names, const SchemeConfig&
   }
 }
 
-SchemeConfig config_for(const std::string& name, const SchemeConfig& run_cfg) {
-  const SchemeInfo& info = find_scheme(name);
+SchemeConfig config_for(const std::string& entry, const SchemeConfig& run_cfg) {
+  const SchemeInfo& info = find_scheme(entry);
   SchemeConfig c;
   c.kernel = run_cfg.kernel;
   for (const auto& [key, value] : run_cfg.params)
     if (find_param(info.params, key)) c.params[key] = value;
+  // The entry's own parameters (NAME:KEY=VALUE:...), each declared by this scheme, override.
+  for (size_t at = entry.find(':'); at != std::string::npos;) {
+    const size_t end = entry.find(':', at + 1);
+    const std::string kv = entry.substr(at + 1, end == std::string::npos ? std::string::npos : end - at - 1);
+    const size_t eq = kv.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw InputError("scheme entry '" + entry + "': '" + kv + "' is not KEY=VALUE (NAME:KEY=VALUE[:KEY=VALUE...])");
+    const std::string key = kv.substr(0, eq);
+    const ParamSpec* spec = find_param(info.params, key);
+    if (!spec) unknown_param(key, names_of(info.params), "scheme " + info.name);
+    spec->check(kv.substr(eq + 1));
+    c.params[key] = kv.substr(eq + 1);
+    at = end;
+  }
   return c;
 }
 
@@ -114,7 +133,7 @@ std::vector<std::string> expand_scheme_list(const std::string& list) {
   std::stringstream ss(list);
   for (std::string item; std::getline(ss, item, ',');) {
     if (item.empty()) continue;
-    find_scheme(item);
+    config_for(item, {});  // the name and the entry's own parameters
     out.push_back(item);
   }
   if (out.empty()) throw InputError("--schemes is empty");

@@ -20,7 +20,14 @@ struct SchemeInfo {
 };
 
 const std::vector<SchemeInfo>& schemes();
-const SchemeInfo& find_scheme(const std::string& name);  // throws InputError on unknown names
+// A scheme entry of a run: a registered name, optionally with parameters of its own after it,
+// NAME:KEY=VALUE[:KEY=VALUE...] (e.g. embree_single:robust=0), so one run can time the same scheme
+// in two configurations, interleaved (`run --schemes embree_single,embree_single:robust=0`). Its
+// own parameters override the run's --param values for it alone. find_scheme, make_scheme,
+// resolve_config, check_run_params and config_for take entries; the scheme's name() stays the
+// registered name.
+std::string scheme_name_of(const std::string& entry);
+const SchemeInfo& find_scheme(const std::string& entry);  // throws InputError on unknown names
 // Makes one scheme. Every key of cfg.params must be one the scheme declares and every value
 // within its declared range (InputError naming the valid keys, and the closest one to a typo).
 std::unique_ptr<Traverser> make_scheme(const std::string& name, const SchemeConfig& cfg = {});
@@ -32,7 +39,8 @@ SchemeConfig resolve_config(const std::string& name, const SchemeConfig& cfg);
 // declares, so the others are ignored by it.
 void check_run_params(const std::vector<std::string>& names, const SchemeConfig& cfg, const ParamSpecs& extra = {});
 SchemeConfig config_for(const std::string& name, const SchemeConfig& run_cfg);
-// "all" -> every registered scheme; otherwise the comma-separated names, each checked.
+// "all" -> every registered scheme; otherwise the comma-separated entries, each checked (its name,
+// and its own parameters against what the scheme declares).
 std::vector<std::string> expand_scheme_list(const std::string& list);
 
 }  // namespace tb
