@@ -43,7 +43,7 @@ def main():
     ap.add_argument("--small", type=int, default=50000, help="fewer rays than this: re-run with --small-reps")
     ap.add_argument("--small-reps", type=int, default=31)
     ap.add_argument("--size", type=int, default=512, help="image width and height")
-    ap.add_argument("--scenes", default=",".join(default_scenes() + ["room"]))
+    ap.add_argument("--scenes", default=",".join(default_scenes()))
     ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
     ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
     ap.add_argument("--out", default="/tmp/batch_goal")
