@@ -311,22 +311,24 @@ inline void probe_leaf(const MBVH<N, W>& m, uint32_t ref, P& probe, uint32_t act
   }
 }
 
-// Starts fetching what `ref` names: an interior node, or the first 256 bytes of a leaf's triangle
-// block. prefetch_ref (below) skips leaves; mbvh8_packet's coherent path prefetches every child it
-// pushes, the nearest included, with this: +2 to +4% against embree_packet8 on primary rays of the
-// scanned models and the held-out-shaped scene (interleaved, pinned runs; docs/PERFORMANCE.md,
-// session 20). The one-ray loop measured no difference and keeps prefetch_ref.
+// Starts fetching what `ref` names: an interior node, or a leaf's first triangle block (all five
+// lines of an 8-wide one). prefetch_ref (below) skips leaves; mbvh8_packet's coherent path
+// prefetches every child it pushes, the nearest included, with this: +1 to +3% against
+// embree_packet8 on primary rays of the scanned models and the held-out-shaped scene, and the whole
+// block instead of its first four lines +3% more on spheres:1000000 (interleaved, pinned runs;
+// docs/PERFORMANCE.md, session 20). The one-ray loop measured no difference and keeps prefetch_ref.
 template <int N, int W>
 [[gnu::always_inline]] inline void prefetch_any(const MBVH<N, W>& m, uint32_t ref) {
   const char* p;
+  size_t bytes;
   if (!mbvh_ref::is_leaf(ref)) {
-    p = reinterpret_cast<const char*>(&m.nodes[ref]);
+    p = reinterpret_cast<const char*>(&m.nodes[ref]), bytes = sizeof(MBVHNode<N>);
   } else if (W == 8 && mbvh_ref::num_tris(ref) <= m.small_leaf) {
-    p = reinterpret_cast<const char*>(&m.small[mbvh_ref::first_block(ref)]);
+    p = reinterpret_cast<const char*>(&m.small[mbvh_ref::first_block(ref)]), bytes = sizeof(TriBlock<4>);
   } else {
-    p = reinterpret_cast<const char*>(&m.blocks[mbvh_ref::first_block(ref)]);
+    p = reinterpret_cast<const char*>(&m.blocks[mbvh_ref::first_block(ref)]), bytes = sizeof(TriBlock<W>);
   }
-  for (size_t l = 0; l < sizeof(MBVHNode<N>); l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
+  for (size_t l = 0; l < bytes; l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
 }
 
 // Starts fetching a node that goes onto the stack: single-ray traversal is bound by the latency
