@@ -491,8 +491,14 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
         for (uint32_t j = 0; j < cnt[c]; ++j) probe.write(&dst[j], sizeof(uint16_t));
       head[c] += cnt[c];
     }
+    // Every child task pushed starts the fetch of its node or first block (prefetch_any: all of
+    // it), the nearest too: its first ray's test would otherwise wait for the whole fetch.
+    // bounce:3, 3 interleaved rounds, mbvh_rs / mbvh8_single, against the two lines of the farther
+    // children only: sponza 1.301 -> 1.343, conference 1.376 -> 1.391, sibenik_lucy 1.207 -> 1.348
+    // (docs/PERFORMANCE.md, session 20).
     if (!(active & (active - 1))) {
       const int c = std::countr_zero(active);
+      prefetch_any(m, nd.ref[c]);
       tasks[ntasks] = {nd.ref[c], uint32_t(c), cnt[c]};
       probe.write(&tasks[ntasks++], sizeof(Task));
       continue;
@@ -513,16 +519,9 @@ void trace(const MBVH<N, 4>& m, const TriangleSet* ts, Scratch& s, const Rays& v
     }
     for (int j = std::popcount(active) - 1; j >= 0; --j) {
       const uint32_t c = uint32_t(keys[j]) & (N - 1);
+      prefetch_any(m, nd.ref[c]);
       tasks[ntasks] = {nd.ref[c], c, cnt[c]};
       probe.write(&tasks[ntasks++], sizeof(Task));
-      // The farther children wait on the stack: start fetching their node or first block.
-      if (j > 0) {
-        const uint32_t ref = nd.ref[c];
-        const char* p = mbvh_ref::is_leaf(ref) ? reinterpret_cast<const char*>(blocks + mbvh_ref::first_block(ref))
-                                               : reinterpret_cast<const char*>(nodes + ref);
-        _mm_prefetch(p, _MM_HINT_T0);
-        _mm_prefetch(p + 64, _MM_HINT_T0);
-      }
     }
   }
 }
