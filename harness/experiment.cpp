@@ -157,6 +157,12 @@ double median_of(std::vector<double> v) {
   const size_t n = v.size();
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
+
+// A run's row names the scheme entry as given (embree_single:robust=0 and embree_single are two
+// rows) and the parameters it ran with, its own included.
+void label_entry(Record& r, const std::string& entry, const RunOptions& opt, double prepare_ms) {
+  r.set("scheme", entry).set("params", params_text(entry, opt.scheme_config)).set("prepare_ms", prepare_ms);
+}
 }  // namespace
 
 void set_interleaved_speed(Record& r, const std::vector<double>& sec, const std::vector<double>& base_sec, size_t rays,
@@ -176,14 +182,6 @@ void set_interleaved_speed(Record& r, const std::vector<double>& sec, const std:
       .set("speed_ratio_min", *std::min_element(ratio.begin(), ratio.end()))
       .set("speed_ratio_max", *std::max_element(ratio.begin(), ratio.end()));
 }
-
-namespace {
-// A run's row names the scheme entry as given (embree_single:robust=0 and embree_single are two
-// rows) and the parameters it ran with, its own included.
-void label_entry(Record& r, const std::string& entry, const RunOptions& opt, double prepare_ms) {
-  r.set("scheme", entry).set("params", params_text(entry, opt.scheme_config)).set("prepare_ms", prepare_ms);
-}
-}  // namespace
 
 std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
   std::vector<Record> out;
