@@ -152,12 +152,6 @@ std::string samples_text(const std::vector<double>& mrays) {
 }
 
 namespace {
-double median_of(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 // A run's row names the scheme entry as given (embree_single:robust=0 and embree_single are two
 // rows) and the parameters it ran with, its own included.
 void label_entry(Record& r, const std::string& entry, const RunOptions& opt, double prepare_ms) {

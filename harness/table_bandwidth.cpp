@@ -17,7 +17,6 @@
 
 namespace tb {
 
-
 // Speed, interleaved (measure_interleaved: --reps rounds, every scheme once per round, as `run
 // --interleave` times them): per cell the Mrays/s over the rounds and the per-round speed ratio
 // to the first scheme of the table (mbvh8_single by default), speed_ratio_median, _min, _max, the

@@ -27,6 +27,7 @@
 #include "harness/sweep.h"
 #include "harness/tables.h"
 #include "harness/thesis_reference.h"
+#include "harness/trace_runner.h"
 #include "structures/builtin_scenes.h"
 #include "traversal/registry.h"
 
@@ -124,11 +125,6 @@ struct PixelMoments {
   }
 };
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : (v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]));
-}
-
 }  // namespace
 
 int pathtrace_table(const TableOptions& opt) {
@@ -225,12 +221,12 @@ int pathtrace_table(const TableOptions& opt) {
         const double bias = seeds > 1 ? std::sqrt(std::max(0.0, e_mean * e_mean - noise * noise / seeds -
                                                                    residual * residual))
                                       : 0.0;
-        const double cpu_s = 1e-3 * median(cpu_ms), wall_s = 1e-3 * median(ms);
+        const double cpu_s = 1e-3 * median_of(cpu_ms), wall_s = 1e-3 * median_of(ms);
         const double rays = double(st.ext_rays + st.shadow_rays) / seeds;
         Record r;
         r.set("scene", scene.name).set("scheme", names[si]).set("method", method).set("spp", spp);
         r.set("width", base.width).set("height", base.height).set("threads", 1).set("seeds", seeds);
-        r.set("ms", median(ms)).set("cpu_ms", median(cpu_ms)).set("trace_ms", median(trace_ms));
+        r.set("ms", median_of(ms)).set("cpu_ms", median_of(cpu_ms)).set("trace_ms", median_of(trace_ms));
         r.set("cpu_ms_min", *std::min_element(cpu_ms.begin(), cpu_ms.end()));
         r.set("cpu_ms_max", *std::max_element(cpu_ms.begin(), cpu_ms.end()));
         r.set("rmse", rmse).set("rmse_sd", std::sqrt(sd));
@@ -238,7 +234,7 @@ int pathtrace_table(const TableOptions& opt) {
         r.set("rmse_max", *std::max_element(rmses.begin(), rmses.end()));
         r.set("rmse_corr", rmse_corr).set("noise_rmse", noise).set("bias_rmse", bias);
         r.set("converged_residual_rmse", residual);
-        r.set("mrays", rays / wall_s * 1e-6).set("trace_mrays", rays / (1e-3 * median(trace_ms)) * 1e-6);
+        r.set("mrays", rays / wall_s * 1e-6).set("trace_mrays", rays / (1e-3 * median_of(trace_ms)) * 1e-6);
         r.set("ext_rays", uint64_t(st.ext_rays / seeds)).set("shadow_rays", uint64_t(st.shadow_rays / seeds));
         r.set("rays_per_sample", rays / (double(spp) * base.width * base.height));
         r.set("iterations", uint64_t(st.iterations / seeds));
@@ -261,7 +257,7 @@ int pathtrace_table(const TableOptions& opt) {
           std::fprintf(stderr,
                        "%-12s %-8s %4u spp x%u  cpu %8.1f ms  rmse %7.3f +- %5.3f (corr %7.3f, noise %7.3f, bias %6.3f)  "
                        "util %.3f  warp %.3f\n",
-                       names[si].c_str(), method.c_str(), spp, seeds, median(cpu_ms), rmse, std::sqrt(sd), rmse_corr,
+                       names[si].c_str(), method.c_str(), spp, seeds, median_of(cpu_ms), rmse, std::sqrt(sd), rmse_corr,
                        noise, bias, st.util(), st.warp_util());
         if (opt.run.cells) opt.run.cells->append(r);
         records.push_back(std::move(r));

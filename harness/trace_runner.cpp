@@ -44,6 +44,12 @@ void trace_batch(const Traverser& t, const RayBatch& batch, std::span<Hit> hits,
   for (auto& th : pool) th.join();
 }
 
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n == 0 ? 0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
 std::vector<std::vector<double>> measure_interleaved(std::span<const Traverser* const> schemes, const RayBatch& batch,
                                                      std::span<Hit> hits, int threads, int rounds) {
   for (const Traverser* t : schemes) trace_batch(*t, batch, hits, threads);  // warm-up
@@ -69,11 +75,9 @@ ThroughputStats measure(const Traverser& t, const RayBatch& batch, std::span<Hit
     s.seconds.push_back(sec);
     mrays.push_back(double(batch.size()) / std::max(sec, 1e-9) * 1e-6);
   }
-  std::sort(mrays.begin(), mrays.end());
-  const size_t n = mrays.size();
-  s.mrays_min = mrays.front();
-  s.mrays_max = mrays.back();
-  s.mrays_median = n % 2 ? mrays[n / 2] : 0.5 * (mrays[n / 2 - 1] + mrays[n / 2]);
+  s.mrays_min = *std::min_element(mrays.begin(), mrays.end());
+  s.mrays_max = *std::max_element(mrays.begin(), mrays.end());
+  s.mrays_median = median_of(mrays);
   return s;
 }
 

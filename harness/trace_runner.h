@@ -14,6 +14,9 @@ void enable_ftz_daz();
 // Traces the whole batch with `threads` threads pulling chunks of packets.
 void trace_batch(const Traverser& t, const RayBatch& batch, std::span<Hit> hits, int threads);
 
+// The median of v (the mean of the middle two for an even count; 0 for none).
+double median_of(std::vector<double> v);
+
 struct ThroughputStats {
   double mrays_median = 0, mrays_min = 0, mrays_max = 0;
   std::vector<double> seconds;  // one per repetition

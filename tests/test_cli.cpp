@@ -339,7 +339,9 @@ TEST(CLI, InterleavedRunGivesPerRoundRatiosToTheFirstScheme) {
     EXPECT_GT(lo, 0.0) << lines[i];
     EXPECT_LE(lo, med) << lines[i];
     EXPECT_LE(med, hi) << lines[i];
-    if (row["scheme"] == "mbvh8_single") EXPECT_EQ(med, 1.0) << lines[i];
+    if (row["scheme"] == "mbvh8_single") {
+      EXPECT_EQ(med, 1.0) << lines[i];
+    }
     // A scheme entry with parameters of its own is a row of its own, naming them.
     EXPECT_EQ(row["params"], row["scheme"] == "bvh_single:leaf_size=1" ? "leaf_size=1" : "") << lines[i];
     EXPECT_EQ(row["mismatch_rate"], "0") << lines[i];
