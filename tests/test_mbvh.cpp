@@ -423,7 +423,9 @@ void block_matches_scalar() {
         Hit c = initial_hit(ray);
         block_intersect<4, 8>(TriRay<8>(rc, ray.tmin), blk, c, lanes);
         ASSERT_EQ(c.prim, b.prim) << "iter " << iter << " ray " << r;
-        if (c.hit()) EXPECT_TRUE(c.t == b.t && c.u == b.u && c.v == b.v) << "iter " << iter << " ray " << r;
+        if (c.hit()) {
+          EXPECT_TRUE(c.t == b.t && c.u == b.u && c.v == b.v) << "iter " << iter << " ray " << r;
+        }
       }
       if (a.hit()) {
         ++hits;

@@ -89,7 +89,7 @@ inline constexpr std::array<std::array<uint64_t, 256>, 8> kCWOctantOrder = [] {
 // underflowing A to zero as the bound allows.
 struct CWRay {
   __m256 r44;  // [r | r] of the three axes (lanes 3 and 7 NaN)
-  __m256 c44;  // [c_near | c_far]: one fma gives a node's six B = fl(p r + c)
+  __m256 cn44, cf44;  // [c_near | c_near], [c_far | c_far]: two fmas give a node's six B = fl(p r + c)
   __m256 tmin;
   __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
   const uint32_t* rows;
@@ -101,7 +101,8 @@ struct CWRay {
     // E = 8 u (K + |o|) R + 2^-110 (1 + R).
     const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
     r44 = _mm256_set_m128(p.r, p.r);
-    c44 = _mm256_set_m128(p.cf, p.cn);
+    cn44 = _mm256_set_m128(p.cn, p.cn);
+    cf44 = _mm256_set_m128(p.cf, p.cf);
     // exp_add: every used axis (r not NaN) has a normal r and r_exp + e in 1..254 for e_min..e_max.
     const __m128i ex = _mm_and_si128(_mm_srli_epi32(_mm_castps_si128(p.r), 23), _mm_set1_epi32(0xFF));
     const __m128i lo = _mm_add_epi32(ex, _mm_set1_epi32(std::min(e_min, 0)));  // also r_exp >= 1: r normal
@@ -133,18 +134,22 @@ struct CWRay {
 // integer add. The same value as the multiply (CWBVH.ExponentAddEqualsTheProduct), on a shorter
 // path from the node's bytes to its plane distances, which single-ray traversal waits on at every
 // node: cwbvh_single +1.3 to +2.9% (crytek_sponza_partial, sponza, conference; docs/PERFORMANCE.md, session 17).
-// The six B = fl(p r + c) come from one 8-wide fma on [p | p] and [r | r], [c_near | c_far]
-// (session 17; before: three broadcasts of p and six fmas on per-axis broadcasts): the same values,
-// 4 ray constants in registers instead of 10 (AVX2 has 16), 8-11% fewer instructions (callgrind,
-// crytek and bunny, primary and bounce:2).
+// The six B = fl(p r + c) come from two 8-wide fmas on [p | p] and [r | r], one with [c_near |
+// c_near] and one with [c_far | c_far] (session 17: three broadcasts of p and six fmas on per-axis
+// broadcasts before, 8-11% fewer instructions; 5 ray constants in registers instead of 10, AVX2
+// has 16). Each axis' B_near and B_far is then an in-lane permute (session 21: one fma giving
+// [c_near | c_far] needed two lane-crossing permutes per axis, 3 cycles each on the path from the
+// node's load to its distances; the same values, cwbvh_single / mbvh8_single +1.5% on primary
+// rays of spheres:2M, crytek and bunny, AVX2 build, interleaved; bounce:2 unchanged).
 template <bool ExpAdd = false>
 [[gnu::always_inline]] inline __m256 cw_box_test(const CWNode& nd, const CWRay& r, __m256 tfar, __m256& tn) {
   static_assert(offsetof(CWNode, p) == 0 && offsetof(CWNode, e) == 12 && offsetof(CWNode, imask) == 15);
   // [p e | p e]: the node's first 16 bytes in both halves (lanes 3 and 7 hold e and imask: junk,
   // never read into a distance).
   const __m256 head = _mm256_broadcast_ps(reinterpret_cast<const __m128*>(&nd));
-  // [B_near | B_far] of the three axes, B = fl(p r + c), in one fma.
-  const __m256 B8 = _mm256_fmadd_ps(head, r.r44, r.c44);
+  // [B_near | B_near] and [B_far | B_far] of the three axes, B = fl(p r + c): each axis' B is then
+  // one in-lane permute away from a broadcast (no lane crossing on the path to the plane distances).
+  const __m256 Bn8 = _mm256_fmadd_ps(head, r.r44, r.cn44), Bf8 = _mm256_fmadd_ps(head, r.r44, r.cf44);
   __m256 A8;  // [A | A], A = 2^e r
   if constexpr (ExpAdd) {
     // e_a into the top byte of lane a (zeros below: 0x80 selects 0), shifted down to e_a * 2^23
@@ -162,9 +167,8 @@ template <bool ExpAdd = false>
   }
   __m256 n = r.tmin, f = tfar;
   for (int a = 0; a < 3; ++a) {
-    // [B_near,a x4 | B_far,a x4] by an in-lane permute, then each half to both halves.
-    const __m256 A = _mm256_permute_ps(A8, 0x55 * a), Ba = _mm256_permute_ps(B8, 0x55 * a);
-    const __m256 Bn = _mm256_permute2f128_ps(Ba, Ba, 0x00), Bf = _mm256_permute2f128_ps(Ba, Ba, 0x11);
+    const __m256 A = _mm256_permute_ps(A8, 0x55 * a);
+    const __m256 Bn = _mm256_permute_ps(Bn8, 0x55 * a), Bf = _mm256_permute_ps(Bf8, 0x55 * a);
     n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, Bn), n);
     f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, Bf), f);
   }
