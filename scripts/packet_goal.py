@@ -5,7 +5,7 @@ best single-ray scheme (the thesis' packet speed-up).
 
 Usage:
   /usr/bin/python3 scripts/packet_goal.py [--rounds 3] [--scenes S,S,...] [--schemes P,P,...]
-      [--cpu N] [--out /tmp/packet_goal] [--markdown]
+      [--isa default|avx2|...] [--cpu N] [--out /tmp/packet_goal] [--markdown]
 
 Each round runs, per scene in turn, one `travbench run --interleave` process with the packet
 schemes (--schemes; default mbvh8_packet,bvh_ranged), mbvh8_single, embree_packet8 and
@@ -13,7 +13,9 @@ embree_single on primary rays (512x512, 1 thread; the schemes timed round by rou
 so every ratio is of one process and the same minutes of the machine. Per round the best packet is
 the fastest of --schemes. Printed per scene: the median (min-max) over the rounds of best packet /
 embree_packet8 and best packet / best single (mbvh8_single or embree_single), and which packet
-scheme won how many rounds. `--cpu N` pins the processes (see single_ray_goal.py). Scene names
+scheme won how many rounds. `--isa` asks Embree for those kernels (single_ray_goal.py: its AVX2
+ones are the reference machine's, and on an AVX-512 machine the faster single-ray ones). `--cpu N`
+pins the processes (see single_ray_goal.py). Scene names
 resolve as in single_ray_goal.py (../shared/scenes/NAME.obj, a built-in scene, or a path); the
 default adds the held-out-shaped scene of scripts/heldout_scene.py when /tmp/heldout/heldout.obj exists.
 """
@@ -37,6 +39,7 @@ def main():
     ap.add_argument("--scenes", default=",".join(default_scenes() + extra))
     ap.add_argument("--schemes", default="mbvh8_packet,bvh_ranged", help="the packet schemes; the fastest is 'best'")
     ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
+    ap.add_argument("--isa", default="default", choices=["default", "avx2", "avx512", "avx", "sse4.2", "sse2"])
     ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
     ap.add_argument("--out", default="/tmp/packet_goal")
     ap.add_argument("--markdown", action="store_true", help="print a markdown table")
@@ -49,11 +52,12 @@ def main():
         sys.exit(f"packet_goal: no travbench binary at {args.travbench} (build first, or pass --travbench)")
     os.makedirs(args.out, exist_ok=True)
     schemes = ",".join(packets + list(SINGLE) + ["embree_packet8"])
+    isa = [] if args.isa == "default" else [f"isa={args.isa}"]
     scenes = [s for s in args.scenes.split(",") if s]
     cells = {s: ([], [], []) for s in scenes}  # best packet / embree_packet8, / best single; which packet
     for r in range(1, args.rounds + 1):
         for s in scenes:
-            m = run(args.travbench, s, schemes, [], args, f"{args.out}/{s.replace('/', '_').replace(':', '_')}_{r}.csv")
+            m = run(args.travbench, s, schemes, isa, args, f"{args.out}/{s.replace('/', '_').replace(':', '_')}_{r}.csv")
             speed = {k: m[("primary", k)] for k in packets + list(SINGLE) + ["embree_packet8"]}
             best = max(packets, key=speed.get)
             c = cells[s]
@@ -63,7 +67,7 @@ def main():
             print(f"round {r}: {s} done", file=sys.stderr)
 
     head = ["scene", "best packet / embree_packet8 (>= 1.0)", "best packet / best single", "best packet (rounds)"]
-    print(f"# {args.rounds} rounds, primary, {args.size}x{args.size}, --reps {args.reps} interleaved, "
+    print(f"# {args.rounds} rounds, primary, {args.size}x{args.size}, --reps {args.reps} interleaved, Embree isa={args.isa}, "
           f"cpu {'any' if args.cpu is None else args.cpu}; median (min-max) over the rounds")
     rows = [[scene_label(s), fmt_rounds(emb), fmt_rounds(single), ", ".join(f"{k} {which.count(k)}" for k in packets if k in which)]
             for s, (emb, single, which) in cells.items()]
