@@ -23,17 +23,11 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from single_ray_goal import ROOT, default_scenes, fmt_rounds, print_table, run, scene_label  # noqa: E402
+from single_ray_goal import ROOT, default_scenes, fmt_rounds, print_table, run_sized, scene_label  # noqa: E402
 
 SCHEMES = "mbvh8_single,mbvh4_single,mbvh_rs,raygrid,embree_stream,embree_single"
 BATCH, SINGLE = ("mbvh_rs", "raygrid"), ("mbvh8_single", "mbvh4_single", "embree_single")
 ARCHITECTURAL = {"sponza", "crytek_sponza_partial", "sibenik", "sibenik_lucy", "conference", "room"}
-
-
-def rays_of(csv_path):
-    with open(csv_path) as f:
-        next(f)
-        return int(next(f).split(",")[6])
 
 
 def main():
@@ -62,10 +56,7 @@ def main():
     for r in range(1, args.rounds + 1):
         for s in scenes:
             path = f"{args.out}/{s.replace('/', '_').replace(':', '_')}_{r}.csv"
-            m = run(args.travbench, s, SCHEMES, args.param, args, path)
-            if rays_of(path) < args.small:
-                m = run(args.travbench, s, SCHEMES, args.param,
-                        argparse.Namespace(**{**vars(args), "reps": args.small_reps}), path)
+            m = run_sized(args.travbench, s, SCHEMES, args.param, args, path)
             speed = {k: m[("bounce:3", k)] for k in BATCH + SINGLE + ("embree_stream",)}
             batch = max(BATCH, key=speed.get)
             c = cells[s]

@@ -6,7 +6,8 @@ which Embree builds spatial splits).
 
 Usage:
   /usr/bin/python3 scripts/single_ray_goal.py [--rounds 3] [--isa default|avx2] [--scenes S,S,...]
-      [--ours mbvh8_single[,cwbvh_single,...]] [--cpu N] [--out /tmp/single_ray_goal] [--markdown]
+      [--ours mbvh8_single[,cwbvh_single,...]] [--small 50000 --small-reps 31] [--cpu N]
+      [--out /tmp/single_ray_goal] [--markdown]
 
 Each round runs, per scene in turn, one `travbench run --interleave` process:
   --schemes <ours>,embree_single,embree_single:robust=0
@@ -20,6 +21,9 @@ machine's ISA); the default is Embree's run-time choice. `--cpu N` pins every pr
 (taskset): on a shared VM one core can be slowed by another tenant on its caches while the other is
 not (docs/PERFORMANCE.md, session 20); the sidecars record the affinity. The CSVs stay in
 --out. Timings on a shared machine move by several percent: use 3 or more rounds on an idle machine.
+A process whose smallest batch holds fewer than --small rays (the scanned models' bounce:2: ~5000
+rays, a trace of ~1 ms) is re-run at once with --small-reps repetitions, and that run is the
+round's (as batch_goal.py does).
 """
 import argparse
 import csv
@@ -44,6 +48,20 @@ def scene_arg(name):
         return name
     path = os.path.join(SHARED, name + ".obj")
     return path if os.path.exists(path) else name  # a built-in scene (stadium, room, spheres:N)
+
+
+def min_rays(csv_path):
+    """The fewest rays of any row of a run CSV (its smallest batch)."""
+    with open(csv_path) as f:
+        return min(int(r["rays"]) for r in csv.DictReader(line for line in f if not line.startswith("#")))
+
+
+def run_sized(travbench, scene, schemes, params, args, csv_path):
+    """run(), re-run with --small-reps when a batch holds fewer than --small rays."""
+    m = run(travbench, scene, schemes, params, args, csv_path)
+    if min_rays(csv_path) < args.small:
+        m = run(travbench, scene, schemes, params, argparse.Namespace(**{**vars(args), "reps": args.small_reps}), csv_path)
+    return m
 
 
 def run(travbench, scene, schemes, params, args, csv_path):
@@ -85,6 +103,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--small", type=int, default=50000, help="fewer rays than this: re-run with --small-reps")
+    ap.add_argument("--small-reps", type=int, default=31)
     ap.add_argument("--size", type=int, default=512, help="image width and height")
     ap.add_argument("--workloads", default="primary,bounce:2")
     ap.add_argument("--isa", default="default", choices=["default", "avx2", "avx512", "avx", "sse4.2", "sse2"])
@@ -96,8 +116,8 @@ def main():
     ap.add_argument("--out", default="/tmp/single_ray_goal")
     ap.add_argument("--markdown", action="store_true", help="print a markdown table")
     args = ap.parse_args()
-    if args.rounds < 1 or args.reps < 1:
-        sys.exit("single_ray_goal: --rounds and --reps must be at least 1")
+    if args.rounds < 1 or args.reps < 1 or args.small_reps < 1:
+        sys.exit("single_ray_goal: --rounds, --reps and --small-reps must be at least 1")
     if not os.access(args.travbench, os.X_OK):
         sys.exit(f"single_ray_goal: no travbench binary at {args.travbench} (build first, or pass --travbench)")
     os.makedirs(args.out, exist_ok=True)
@@ -111,7 +131,7 @@ def main():
     for r in range(1, args.rounds + 1):
         for s in scenes:
             tag = s.replace("/", "_").replace(":", "_")
-            a = run(args.travbench, s, args.ours + ",embree_single,embree_single:robust=0", isa, args,
+            a = run_sized(args.travbench, s, args.ours + ",embree_single,embree_single:robust=0", isa, args,
                     f"{args.out}/{tag}_{r}.csv")
             for w in workloads:
                 best = max(ours_schemes, key=lambda k: a[(w, k)])
@@ -126,7 +146,8 @@ def main():
     ours_name = ours_schemes[0] if len(ours_schemes) == 1 else "best single"
     head = ["scene", "workload", f"{ours_name} / embree_single", "Embree HIGH fast / embree_single",
             f"{ours_name} / Embree HIGH fast"] + (["fastest (rounds)"] if len(ours_schemes) > 1 else [])
-    print(f"# {args.rounds} rounds, {args.size}x{args.size}, --reps {args.reps} interleaved, Embree isa={args.isa}, "
+    print(f"# {args.rounds} rounds, {args.size}x{args.size}, --reps {args.reps} ({args.small_reps} under {args.small} rays) "
+          f"interleaved, Embree isa={args.isa}, "
           f"cpu {'any' if args.cpu is None else args.cpu}; median (min-max) over the rounds")
     if args.markdown:
         print("| " + " | ".join(head) + " |")
