@@ -95,7 +95,9 @@ TEST(BVH, SiblingPairsShareACacheLine) {
   BVH bvh = BVH::build(s);
   EXPECT_EQ(reinterpret_cast<uintptr_t>(bvh.nodes.data()) % 64, 0u);
   for (const BVHNode& n : bvh.nodes)
-    if (!n.is_leaf() && &n != &bvh.nodes[1]) EXPECT_EQ(n.left_first % 2, 0u);
+    if (!n.is_leaf() && &n != &bvh.nodes[1]) {
+      EXPECT_EQ(n.left_first % 2, 0u);
+    }
 }
 
 TEST(BVH, RefitTracksMovedGeometry) {

@@ -257,7 +257,9 @@ TEST(Clip, ChopMatchesSlabClips) {
         const AABB exact = clip_triangle_bounds(v[0], v[1], v[2], slab);
         SCOPED_TRACE(::testing::Message() << "triangle " << i << " slab " << k << " of " << n);
         // Clamped, the part's bounds cut to the box may hold points of no part: only one way.
-        if (i % 2 == 0) ASSERT_EQ(out[k].empty(), exact.empty());
+        if (i % 2 == 0) {
+          ASSERT_EQ(out[k].empty(), exact.empty());
+        }
         if (exact.empty()) continue;
         ASSERT_FALSE(out[k].empty());
         ++nonempty;

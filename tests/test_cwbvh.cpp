@@ -385,10 +385,12 @@ TEST(CWBVH, EveryChildOrderIsAccurateAndWatertight) {
       }
       // Hard cases (rays at shared vertices and edges): which triangle is reported is ambiguous
       // there (SchemeRobustness); a miss is not.
-      for (const auto& w : hard_case_names())
-        if (hard_case_must_hit(w))
+      for (const auto& w : hard_case_names()) {
+        if (hard_case_must_hit(w)) {
           EXPECT_EQ(test::accuracy_of(bench, "cwbvh_single", test::small_spec(w, 96), cfg).false_miss, 0u)
               << order << " leaks on " << scene << " / " << w;
+        }
+      }
     }
   }
 }

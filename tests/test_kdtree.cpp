@@ -420,8 +420,12 @@ TEST(KDTraversal, NoLeaksOnHardCases) {
         auto t = make_scheme(name);
         t->prepare(bench.scene(), bench.cache());
         const Accuracy a = compare_hits(trace_with(*t, b), ref);
-        if (hard_case_must_hit(w)) EXPECT_EQ(a.false_miss, 0u) << name << " leaks on " << scene << " / " << w;
-        if (w == "hard:tmin_tmax") EXPECT_EQ(a.false_hit, 0u) << name << " hits inside an empty interval";
+        if (hard_case_must_hit(w)) {
+          EXPECT_EQ(a.false_miss, 0u) << name << " leaks on " << scene << " / " << w;
+        }
+        if (w == "hard:tmin_tmax") {
+          EXPECT_EQ(a.false_hit, 0u) << name << " hits inside an empty interval";
+        }
         EXPECT_LE(a.mismatches, base.mismatches + 1) << name << " on " << scene << " / " << w << " (bvh_single "
                                                      << base.mismatches << " of " << b.size() << ")";
       }
@@ -673,7 +677,9 @@ TEST(KDTraversal, KernelVariantsAndParameters) {
     uint64_t disagree = 0;
     for (size_t i = 0; i < hs.size(); ++i) disagree += hs[i].hit() != ref[i].hit();
     EXPECT_LE(disagree, hs.size() / 100) << kernel_name(k);
-    if (k != TriKernel::plane_rcp) EXPECT_LE(compare_hits(hs, ref).mismatch_rate(), 0.01) << kernel_name(k);
+    if (k != TriKernel::plane_rcp) {
+      EXPECT_LE(compare_hits(hs, ref).mismatch_rate(), 0.01) << kernel_name(k);
+    }
   }
   for (auto params : std::vector<std::map<std::string, std::string>>{
            {{"kd_packet", "8"}}, {{"kd_max_depth", "2"}}, {{"kd_ct", "1"}, {"kd_ci", "80"}}, {{"kd_planar_both", "1"}},

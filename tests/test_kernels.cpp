@@ -211,7 +211,9 @@ void check_lanes(const KernelCase& c) {
       EXPECT_EQ(bits(uv[0][l]), bits(u1));
       EXPECT_EQ(bits(uv[1][l]), bits(v1));
       EXPECT_EQ(bits(uv[2][l]), bits(w1));
-      if (in1) EXPECT_EQ(bits(uv[3][l]), bits(d1));  // det: defined where the test passes
+      if (in1) {
+        EXPECT_EQ(bits(uv[3][l]), bits(d1));  // det: defined where the test passes
+      }
       zero_edges += u1 == 0.f || v1 == 0.f || w1 == 0.f;
     }
     // Moller and the plane kernels, against the one-ray wrappers.
@@ -277,6 +279,36 @@ TEST(KernelLibrary, PlaneDistanceFourLanesMatchesScalar) {
     }
   }
   EXPECT_GT(finite, 100);
+}
+
+// RayCtx's two ways of choosing the shear axes (branching for common-origin batches, branch-free
+// for the others) give the same axes and constants for every direction: ties between components
+// (the first of equal magnitudes wins in both), zeros, signed zeros, denormals and both signs.
+TEST(KernelLibrary, BranchFreeShearAxesMatchBranching) {
+  std::mt19937 rng(21);
+  const float special[] = {0.f, -0.f, 1.f, -1.f, 0.5f, -0.5f, 1e-38f, -1e-38f, 1e-45f, 3e38f, -3e38f};
+  std::vector<Vec3> dirs;
+  for (float x : special)
+    for (float y : special)
+      for (float z : special) dirs.push_back({x, y, z});
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  for (int i = 0; i < 20000; ++i) dirs.push_back({u(rng), u(rng), u(rng)});
+  int checked = 0;
+  for (const Vec3& d : dirs) {
+    if (d.x == 0.f && d.y == 0.f && d.z == 0.f) continue;  // not a direction
+    const Ray ray{{0.25f, -3.f, 7.f}, 0.f, d, INFINITY};
+    const RayCtx a(ray, RayCtx::ShearAxes::branching), b(ray, RayCtx::ShearAxes::branch_free);
+    ASSERT_EQ(a.kx, b.kx) << d.x << " " << d.y << " " << d.z;
+    ASSERT_EQ(a.ky, b.ky) << d.x << " " << d.y << " " << d.z;
+    ASSERT_EQ(a.kz, b.kz) << d.x << " " << d.y << " " << d.z;
+    ASSERT_EQ(std::bit_cast<uint32_t>(a.sx), std::bit_cast<uint32_t>(b.sx));
+    ASSERT_EQ(std::bit_cast<uint32_t>(a.sy), std::bit_cast<uint32_t>(b.sy));
+    ASSERT_EQ(std::bit_cast<uint32_t>(a.sz), std::bit_cast<uint32_t>(b.sz));
+    ++checked;
+  }
+  EXPECT_GT(checked, 21000);
+  EXPECT_EQ(RayCtx::axes_for(true), RayCtx::ShearAxes::branching);
+  EXPECT_EQ(RayCtx::axes_for(false), RayCtx::ShearAxes::branch_free);
 }
 
 TEST(TriangleKernels, ParseKernelNames) {

@@ -373,7 +373,9 @@ TEST(PacketSchemes, RangedCountsTheRaysThatIntersectTheNode) {
     EXPECT_EQ(ranged.leaf_ray_visits, partition.leaf_ray_visits) << w;
     EXPECT_GE(ranged.node_range_visits, ranged.node_ray_visits) << w;
     EXPECT_EQ(partition.node_range_visits, partition.node_ray_visits) << w;
-    if (std::string(w) == "bounce:1") EXPECT_GT(ranged.node_range_visits, ranged.node_ray_visits * 11 / 10) << w;
+    if (std::string(w) == "bounce:1") {
+      EXPECT_GT(ranged.node_range_visits, ranged.node_ray_visits * 11 / 10) << w;
+    }
   }
 }
 

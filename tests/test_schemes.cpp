@@ -87,9 +87,10 @@ TEST_P(SchemeRobustness, NoLeaksOnMustHitHardCases) {
         // Without an offset every ray starts strictly inside a closed mesh; with one, float
         // quantisation can put origins on surfaces, so there only the comparison counts.
         const auto& ref = bench.reference_hits(spec);
-        if (scene.find('@') == std::string::npos)
+        if (scene.find('@') == std::string::npos) {
           EXPECT_TRUE(std::all_of(ref.begin(), ref.end(), [](const Hit& h) { return h.hit(); }))
               << "reference misses on must-hit " << scene << " / " << w;
+        }
       } else if (w == "hard:tmin_tmax") {
         EXPECT_EQ(a.false_hit, 0u) << GetParam() << " reports a hit in an empty interval";
       }

@@ -55,8 +55,9 @@ TEST(SimtExecutor, HitsEqualTheReferenceForEveryLoopAndRefill) {
           trace_batch(*simt, b, hits, 2);
           trace_batch(*single, b, expected, 1);
           EXPECT_EQ(compare_hits(hits, expected).mismatches, 0u) << loop << "/" << refill << "/" << lanes << " on " << w;
-          if (w.rfind("hard:", 0) != 0)
+          if (w.rfind("hard:", 0) != 0) {
             EXPECT_LE(compare_hits(hits, room().reference_hits(spec)).mismatches, 1u) << loop << "/" << refill << " on " << w;
+          }
         }
       }
 }

@@ -52,7 +52,9 @@ TEST(TableBandwidth, RoundsInterleaveAndRatiosPairTheSameRound) {
     EXPECT_NEAR(std::stod(t.at(i, median)), ratio[1], 1e-3 * ratio[1]);
     EXPECT_NEAR(std::stod(t.at(i, lo)), ratio[0], 1e-3 * ratio[0]);
     EXPECT_NEAR(std::stod(t.at(i, hi)), ratio[2], 1e-3 * ratio[2]);
-    if (i == b) EXPECT_EQ(t.at(i, median), "1");
+    if (i == b) {
+      EXPECT_EQ(t.at(i, median), "1");
+    }
     EXPECT_GT(std::stod(t.at(i, reads)), 0.0);
   }
   std::filesystem::remove_all(dir);

@@ -19,7 +19,9 @@ TEST(Workloads, Fig16LayoutCoversTheTileOnce) {
     EXPECT_LT(x, 16u);
     EXPECT_LT(y, 16u);
     seen.insert({x, y});
-    if (i < 64) EXPECT_TRUE(x < 8 && y < 8) << "first 64 rays are the first quadrant";
+    if (i < 64) {
+      EXPECT_TRUE(x < 8 && y < 8) << "first 64 rays are the first quadrant";
+    }
   }
   EXPECT_EQ(seen.size(), 256u);
   uint32_t x0, y0, x3, y3;

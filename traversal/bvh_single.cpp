@@ -16,8 +16,9 @@ class BVHSingle final : public BVHScheme<BVHSingle> {
     const BVH& bvh = *data_.tree;
     const TriangleSet& tris = *data_.tris;
     std::vector<BVHStackEntry> stack(bvh.stats.max_depth + 2);
+    const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
-      const RayCtx rc(ray);
+      const RayCtx rc(ray, axes);
       bvh_closest_hit(bvh.nodes.data(), rc, ray.tmin, hit, stack.data(), probe, [&](const BVHNode& n) {
         for (uint32_t k = n.left_first; k < n.left_first + n.count; ++k) {
           probe.tris(tris.data_at(k, K), TriangleSet::bytes(K));

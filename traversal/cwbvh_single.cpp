@@ -119,9 +119,10 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
     const CWOrder order = order_ == OrderParam::octant ? CWOrder::octant
                           : sorts_batch(order_, batch)    ? CWOrder::sort
                                                           : CWOrder::branching;
+    const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       if (t.blocks.empty()) return;  // an empty scene: nothing to hit
-      const RayCtx rc(ray);
+      const RayCtx rc(ray, axes);
       const CWRay cr(rc, ray.tmin, t.coord_bound, t.e_min, t.e_max);
       const TriRay<8> tr(rc, ray.tmin);
       const auto go = [&]<CWOrder O>() {

@@ -31,8 +31,9 @@ class KDSingle final : public KDScheme<KDSingle> {
     const KDNode* nodes = kd.nodes.data();
     // Each push is followed by a descent, so the stack never holds more than the depth.
     Entry stack[KDTree::kMaxDepth + 2];
+    const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
-      const RayCtx rc(ray);
+      const RayCtx rc(ray, axes);
       float tn, tf;
       if (!kd.nodes.empty() && kd_clip_ray(kd.bounds, rc.org, rc.dir, rc.inv, ray.tmin, ray.tmax, tn, tf)) {
         const float org[3] = {rc.org.x, rc.org.y, rc.org.z};

@@ -51,16 +51,36 @@ struct RayCtx {
   // Watertight shear (Woop et al. 2013, §3): permute so z is the dominant direction axis.
   int kx, ky, kz;
   float sx, sy, sz;
-  explicit RayCtx(const Ray& r) : org(r.org), dir(r.dir) {
+  // How the shear axes are chosen: ShearAxes::branching compares and branches (the default),
+  // branch_free computes them with integer arithmetic on the comparisons. Rays of a
+  // common-origin batch share their dominant axis with their neighbours, so the branches predict
+  // and are the shorter path to the divisions below; a batch of random directions (bounce rays)
+  // mispredicts them about once per ray (0.86 per bunny bounce:2 ray in callgrind's model) and
+  // takes branch_free: mbvh8_single / Embree HIGH fast on bounce:2 +0.8 to +7.6% (dragon_100k,
+  // bunny, sibenik, sponza, lucy_100k), while branch_free on primary rays loses 0.4 to 3.4%
+  // (znver3 build, 3 interleaved rounds; docs/PERFORMANCE.md, session 21). Session 8 had tried two
+  // small tables for every batch: primary rays paid for it (dragon_100k, bvh_ranged 0.924,
+  // mbvh4_single 0.943, bvh_single 0.956); reverted then. Both give the same axes and constants.
+  enum class ShearAxes { branching, branch_free };
+  explicit RayCtx(const Ray& r, ShearAxes axes = ShearAxes::branching) : org(r.org), dir(r.dir) {
     // 1/(+-0) = +-inf (also for denormals under DAZ): the slab test below is NaN-aware.
     inv = {1.f / r.dir.x, 1.f / r.dir.y, 1.f / r.dir.z};
     near_x = std::signbit(inv.x), near_y = std::signbit(inv.y), near_z = std::signbit(inv.z);
-    // The shear axes by branches. Session 8 tried two small tables instead (no branches: a bounce
-    // ray's random direction mispredicted these 1.1 times per ray in callgrind's model): they
-    // lengthen the chain to the divisions below, and primary rays, whose branches predict, paid
-    // for it: dragon_100k primary, interleaved A/B against 984423f, bvh_ranged 0.924, mbvh4_single
-    // 0.943, bvh_single 0.956 (docs/PERFORMANCE.md, session 8); reverted.
-    Vec3 a{std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)};
+    const Vec3 a{std::fabs(dir.x), std::fabs(dir.y), std::fabs(dir.z)};
+    if (axes == ShearAxes::branch_free) {
+      static_assert(sizeof(Vec3) == 3 * sizeof(float));
+      const float* d = &dir.x;  // indexed loads, not Vec3's branching operator[]
+      const int gxy = a.x >= a.y, gxz = a.x >= a.z, gyz = a.y >= a.z;
+      kz = 2 - 2 * (gxy & gxz) - ((gxy ^ 1) & gyz);
+      kx = (kz + 1) * (kz != 2);
+      ky = (kx + 1) * (kx != 2);
+      const int swap = (kx ^ ky) & -int(d[kz] < 0.f);  // keep the winding so backfaces are not culled
+      kx ^= swap, ky ^= swap;
+      sx = d[kx] / d[kz];
+      sy = d[ky] / d[kz];
+      sz = 1.f / d[kz];
+      return;
+    }
     kz = a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);
     kx = kz == 2 ? 0 : kz + 1;
     ky = kx == 2 ? 0 : kx + 1;
@@ -69,6 +89,8 @@ struct RayCtx {
     sy = dir[ky] / dir[kz];
     sz = 1.f / dir[kz];
   }
+  // branch_free for batches without a common origin (the criterion of mbvh8_single's order=auto).
+  static ShearAxes axes_for(bool common_origin) { return common_origin ? ShearAxes::branching : ShearAxes::branch_free; }
 };
 
 // Where a node layout keeps the near (0..2) and far (3..5) plane row of each axis, by ray octant

@@ -583,8 +583,9 @@ void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange
                      P& probe) {
   const MBVH<N, W>& m = *d.mbvh;
   std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
+  const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
   for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
-    const RayCtx rc(ray);
+    const RayCtx rc(ray, axes);
     const NodeRay<N> nr(rc, ray.tmin, m.coord_bound);
     const TriRay<W> tr(rc, ray.tmin);
     if constexpr (kPerOctant) {
