@@ -216,7 +216,9 @@ template <int W, int RW = W>
   f U, Vv, Ww, det;
   int m = S::mask(watertight_inside<W>(Ax, Ay, Bx, By, Cx, Cy, U, Vv, Ww, det));
   if (!m) return false;
-  if (tris < uint32_t(W)) m &= int(lane_bits(tris));
+  // Without a branch: `if (tris < W)` mispredicted 0.33 times per bunny bounce:2 ray (callgrind);
+  // branch-free, mbvh8_single +0.6 to +1.2% on bounce:2 of 5 of 6 scenes (session 21).
+  m &= int(lane_bits(std::min<uint32_t>(tris, W)));
   // The candidates (usually none or one per block): exact_plane_distance's plane equation in
   // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
   alignas(32) float us[W], vs[W], ws[W], dets[W];
