@@ -185,11 +185,12 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
       heap.push({size_of(t), t});
     };
     // Runs the ray of `slot` in treelet t until it finishes (its slot is freed) or leaves.
+    const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);  // a resumed ray rebuilds its RayCtx
     auto run_ray = [&](uint32_t slot, uint32_t t) {
       Slot& s = slots[slot];
       probe.read(&s, sizeof(Slot));
       const Ray& ray = s.r;
-      const RayCtx rc(ray);
+      const RayCtx rc(ray, axes);
       const bool done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
           m, nullptr, NodeRay<8>(rc, ray.tmin, m.coord_bound), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
           [&](uint32_t ref) {
