@@ -563,10 +563,11 @@ TEST(MBVH, ParametersAreValidated) {
   for (const auto& [k, v] : std::vector<std::pair<std::string, std::string>>{
            {"stream", "0"}, {"stream", "70000"}, {"merge", "65"}, {"leaf_size", "0"}, {"tri_width", "16"},
            {"small", "2"}, {"collapse", "best"}, {"tri_cost", "0"}, {"prim_cost", "-1"}, {"prim_share", "2"},
-           {"order", "fast"}}) {
+           {"order", "fast"}, {"prefetch", "always"}, {"llc_mib", "0"}}) {
     SchemeConfig cfg;
     cfg.params[k] = v;
-    const char* scheme = k == "stream" ? "mbvh_rs" : k == "tri_width" || k == "order" ? "mbvh8_single" : "mbvh4_single";
+    const bool eight = k == "tri_width" || k == "order" || k == "prefetch" || k == "llc_mib";
+    const char* scheme = k == "stream" ? "mbvh_rs" : eight ? "mbvh8_single" : "mbvh4_single";
     EXPECT_THROW(make_scheme(scheme, cfg), InputError) << k << "=" << v;
   }
 }
@@ -618,7 +619,7 @@ TEST(MBVH, EveryKernelVariantRuns) {
 // mbvh8_single's child orders (`order`, ChildOrder in traversal/mbvh_traverse.h) and its small
 // leaves: each matches the exact reference on ordinary and hard rays without a leak, and `auto`
 // traces common-origin batches exactly as `branching` and the others exactly as `sort` (the same
-// hits, bit for bit).
+// hits, bit for bit), as `prefetch=on` (ChildOrder::sort_prefetch) traces every batch as `sort`.
 TEST(MBVH, ChildOrdersMatchTheReferenceAndAutoPicksByBatch) {
   for (const char* scene : {"room", "sphere"}) {  // closed: every must-hit hard ray hits
     Bench& bench = test::bench_for(scene);
@@ -629,9 +630,10 @@ TEST(MBVH, ChildOrdersMatchTheReferenceAndAutoPicksByBatch) {
       // "small": auto with 4-wide blocks for leaves of <= 4 triangles, tested through the low
       // halves of the 8-wide ray's constants (lanes_of); "prim_cost", "prim_share": auto on the
       // trees of a collapse that charges each leaf triangle, or the large ones.
-      for (const std::string order : {"sort", "branching", "auto", "small", "prim_cost", "prim_share"}) {
+      for (const std::string order : {"sort", "branching", "auto", "small", "prim_cost", "prim_share", "prefetch"}) {
         SchemeConfig cfg;
         if (order == "small") cfg.params["small"] = "4";
+        else if (order == "prefetch") cfg.params["order"] = "sort", cfg.params["prefetch"] = "on";
         else if (order.rfind("prim_", 0) == 0) cfg.params["prim_cost"] = "25";
         else cfg.params["order"] = order;
         if (order == "prim_share") cfg.params["prim_share"] = "0.5";
@@ -651,6 +653,9 @@ TEST(MBVH, ChildOrdersMatchTheReferenceAndAutoPicksByBatch) {
         const Hit &x = got["auto"][i], &y = same[i];
         ASSERT_TRUE(x.prim == y.prim && (!x.hit() || (x.t == y.t && x.u == y.u && x.v == y.v)))
             << scene << " " << w << " ray " << i;
+        const Hit &p = got["prefetch"][i], &q = got["sort"][i];
+        ASSERT_TRUE(p.prim == q.prim && (!p.hit() || (p.t == q.t && p.u == q.u && p.v == q.v)))
+            << scene << " " << w << " prefetch, ray " << i;
       }
     }
   }

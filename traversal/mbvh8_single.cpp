@@ -22,6 +22,14 @@
 // bounce:2 branching was 2-6% behind sort (docs/PERFORMANCE.md, session 8). The hint is the one
 // the Embree baselines pass as RTC_INTERSECT_CONTEXT_FLAG_COHERENT. The other kernels and
 // tri_width=4 always take the branching order.
+// prefetch=auto (default) makes the sorted batches fetch the second-nearest entered child early
+// (ChildOrder::sort_prefetch) when the nodes and blocks exceed llc_mib (32: a Zen 3 CCX's L3; this
+// VM's sysconf/CPUID report 508 MiB, so the size is a parameter, not a query). bounce:2, one
+// interleaved process per scene, 2 rounds, prefetch on / off (znver3 build; docs/PERFORMANCE.md
+// session 22): spheres:500000 (33 MiB) 1.06-1.08, spheres:1000000 (66 MiB) and spheres:2000000
+// 1.07; at 16 MiB (spheres:250000) 0.96-1.01, and the cached scenes 0.91-0.99 (stadium 0.91,
+// conference 0.96, sibenik and dragon_100k 0.96): the prefetch instructions cost where the child
+// is in the cache anyway.
 #include "traversal/mbvh_traverse.h"
 #include "traversal/mbvh_fetch.h"
 
@@ -34,8 +42,15 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
  public:
   // tri_width=4: layout 0, 8: layout 1.
   explicit MBVH8Single(const SchemeConfig& cfg)
-      : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1), order_(parse_order_param(cfg.get_choice("order"))) {}
+      : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1),
+        order_(parse_order_param(cfg.get_choice("order"))),
+        prefetch_param_(cfg.get_choice("prefetch")),
+        llc_bytes_(size_t(cfg.get_int("llc_mib")) << 20) {}
   std::string_view name() const override { return "mbvh8_single"; }
+  void prepare(const Scene& scene, StructureCache& cache) override {
+    MBVHScheme::prepare(scene, cache);
+    prefetch_ = prefetch_param_ == "on" || (prefetch_param_ == "auto" && memory().total() > llc_bytes_);
+  }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -45,6 +60,10 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
         constexpr TriKernel K = decltype(k)::value;
         constexpr int W = std::decay_t<decltype(d)>::kW;
         if constexpr (W == 8 && K == TriKernel::watertight) {
+          if (sort && prefetch_) {
+            mbvh_trace_rays<8, W, K, ChildOrder::sort_prefetch>(d, batch, range, hits, probe);
+            return;
+          }
           if (sort) {
             mbvh_trace_rays<8, W, K, ChildOrder::sort_always>(d, batch, range, hits, probe);
             return;
@@ -57,6 +76,9 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
 
  private:
   OrderParam order_;
+  std::string prefetch_param_;
+  size_t llc_bytes_;
+  bool prefetch_ = false;  // sort_always batches take ChildOrder::sort_prefetch (decided in prepare)
 };
 
 }  // namespace
@@ -67,7 +89,13 @@ ParamSpecs params_mbvh8_single() {
          ParamSpecs{int_choice_param("tri_width", 8, {4, 8}, "triangles per leaf block: 4 (SSE) or 8 (AVX2)"),
                     choice_param("order", "auto", {"auto", "sort", "branching"},
                                  "child order (ChildOrder, watertight 8-wide blocks): sort = sort_always, branching, "
-                                 "auto = branching for common-origin batches, sort_always otherwise")};
+                                 "auto = branching for common-origin batches, sort_always otherwise"),
+                    choice_param("prefetch", "auto", {"auto", "on", "off"},
+                                 "sorted batches fetch the second-nearest entered child early (ChildOrder::sort_prefetch): "
+                                 "on, off, or auto = when the nodes and blocks exceed llc_mib"),
+                    int_param("llc_mib", 32, 1, 1 << 20,
+                              "the last-level cache prefetch=auto compares the structure's bytes with, in MiB "
+                              "(default: the reference machine's, a Zen 3 CCX's 32 MiB L3)")};
 }
 
 }  // namespace tb

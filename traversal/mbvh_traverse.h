@@ -343,6 +343,18 @@ inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
   for (size_t l = 0; l < sizeof(MBVHNode<N>); l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
 }
 
+// Starts fetching the first four lines of what `ref` names, a node or a leaf's first block, with
+// the address chosen by a select instead of a branch (ChildOrder::sort_prefetch: the stack top after
+// a push is a node or a leaf unpredictably). A leaf of the `small` array fetches the lines of the
+// `blocks` entry with its index instead: harmless, and small leaves are off by default.
+template <int N, int W>
+[[gnu::always_inline]] inline void prefetch_top(const MBVH<N, W>& m, uint32_t ref) {
+  const char* node = reinterpret_cast<const char*>(m.nodes.data()) + size_t(ref & ~mbvh_ref::kLeaf) * sizeof(MBVHNode<N>);
+  const char* block = reinterpret_cast<const char*>(m.blocks.data()) + size_t(mbvh_ref::first_block(ref)) * sizeof(TriBlock<W>);
+  const char* p = mbvh_ref::is_leaf(ref) ? block : node;
+  for (size_t l = 0; l < 256; l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
+}
+
 struct MBVHStackEntry {
   uint32_t ref;
   float dist;  // entry distance: popped entries at or beyond the closest hit are skipped
@@ -375,12 +387,17 @@ inline void push_in_order8(__m256i refs, __m256 tn, __m256i idx, MBVHStackEntry*
 
 // The 8-wide case of push_sorted on the 8 child references `refs` (the compressed layout of
 // cwbvh_single decodes its references instead of storing them).
-inline uint32_t push_sorted8(__m256i refs, __m256 tn, __m256 entered, int count, MBVHStackEntry* out) {
+// `second` (when given) receives the second-nearest child's reference, taken from registers: a
+// 4-byte load of the entry just stored by the 32-byte stores would wait for store forwarding. With
+// one entered child it is a non-entered slot's reference (never visited; fetching it is harmless).
+inline uint32_t push_sorted8(__m256i refs, __m256 tn, __m256 entered, int count, MBVHStackEntry* out,
+                             uint32_t* second = nullptr) {
   const __m256i keys = mbvh_simd::sort8(mbvh_simd::sort_keys8(tn, entered));
   const __m256i rev = _mm256_sub_epi32(_mm256_set1_epi32(count - 1), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   push_in_order8(refs, tn, _mm256_and_si256(_mm256_permutevar8x32_epi32(keys, rev), _mm256_set1_epi32(7)), out);
-  const __m256i nearest = _mm256_and_si256(keys, _mm256_set1_epi32(7));
-  return uint32_t(_mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(refs, nearest)));
+  const __m256i order = _mm256_permutevar8x32_epi32(refs, _mm256_and_si256(keys, _mm256_set1_epi32(7)));
+  if (second) *second = uint32_t(_mm256_extract_epi32(order, 1));
+  return uint32_t(_mm256_cvtsi256_si32(order));
 }
 
 // Sorts the `count` (>= 3) entered children near-to-far and writes all but the nearest to
@@ -388,7 +405,7 @@ inline uint32_t push_sorted8(__m256i refs, __m256 tn, __m256 entered, int count,
 // Writes N entries (see mbvh_traverse for why the stack always has room for them).
 template <int N>
 inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, typename simd::V<N>::f entered,
-                            int count, MBVHStackEntry* out) {
+                            int count, MBVHStackEntry* out, uint32_t* second = nullptr) {
   if constexpr (N == 4) {
     const __m128i keys = mbvh_simd::sort4(mbvh_simd::sort_keys4(tn, entered));
     // Position j takes sorted entry count-1-j.
@@ -403,7 +420,7 @@ inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, ty
     _mm_storeu_si128(reinterpret_cast<__m128i*>(out) + 1, _mm_unpackhi_epi32(refs, dist));
     return nd.ref[uint32_t(_mm_cvtsi128_si32(keys)) & 3];
   } else {
-    return push_sorted8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)), tn, entered, count, out);
+    return push_sorted8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)), tn, entered, count, out, second);
   }
 }
 
@@ -432,7 +449,15 @@ inline uint32_t min_key8(__m256i k) {
 //    keys of thesis Alg. 2.10. On coherent (primary) rays `branching` is the faster one: its
 //    branches predict well there and the next node's address waits for no key reduction
 //    (mbvh8_single's `order=auto` picks per batch; docs/PERFORMANCE.md, session 8).
-enum class ChildOrder { branching, sort_always };
+//  sort_prefetch (N = 8): sort_always, and after each push it starts fetching the new stack top (the
+//    second-nearest entered child: prefetch_top). That child is visited after the nearest one's
+//    subtree, so the fetch pays only where that subtree's visit does not evict it and the node
+//    would otherwise come from memory: trees larger than the last-level cache. Measured on
+//    bounce:2 (docs/PERFORMANCE.md, session 21): spheres:1000000 +5.5%, spheres:2000000 +3%, but
+//    sibenik -4.8% and dragon_100k -2.2%, whose trees stay cached; mbvh8_single's `prefetch`
+//    parameter chooses it by the structure's bytes.
+enum class ChildOrder { branching, sort_always, sort_prefetch };
+constexpr bool sorts_always(ChildOrder o) { return o != ChildOrder::branching; }
 
 // The `order` parameter of mbvh8_single and cwbvh_single, parsed once when the scheme is made (the
 // registry has already refused any other value): a fixed order, `auto` (branching for
@@ -529,11 +554,17 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
       typename S::f tn;
       const auto entered = box_test<N, Oct>(nd, nr, tfar, tn);
       int mask = S::mask(entered);
-      if constexpr (O == ChildOrder::sort_always) {
+      if constexpr (sorts_always(O)) {
         static_assert(N == 8, "sort_always needs the 8-wide key reduction");
         if (mask) {
           const int count = std::popcount(unsigned(mask));
-          push_sorted<N>(nd, tn, entered, count, stack + sp);
+          if constexpr (O == ChildOrder::sort_prefetch) {
+            uint32_t second;
+            push_sorted<N>(nd, tn, entered, count, stack + sp, &second);
+            prefetch_top(m, second);
+          } else {
+            push_sorted<N>(nd, tn, entered, count, stack + sp);
+          }
           if constexpr (P::enabled) {
             for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
           }
