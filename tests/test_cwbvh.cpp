@@ -373,9 +373,10 @@ TEST(CWBVH, OctantSlotsPutTheFirstEnteredChildInTheOctantsSlot) {
 // work, never the result: as accurate as the reference allows, no leak on the must-hit hard cases,
 // also at offsets.
 TEST(CWBVH, EveryChildOrderIsAccurateAndWatertight) {
-  for (const char* order : {"sort", "branching", "octant"}) {
+  for (const std::string order : {"sort", "branching", "octant", "sort+prefetch"}) {
     SchemeConfig cfg;
-    cfg.params["order"] = order;
+    cfg.params["order"] = order == "sort+prefetch" ? "sort" : order;
+    if (order == "sort+prefetch") cfg.params["prefetch"] = "on";  // CWOrder::sort_prefetch
     for (const std::string scene : {"room", "sphere", "sphere@148376,1234,-223423"}) {
       Bench& bench = test::bench_for(scene);
       for (const char* w : {"primary", "rnd", "bounce:2"}) {

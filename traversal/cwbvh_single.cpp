@@ -6,14 +6,16 @@
 // computed near distance is a lower bound and every far one an upper bound of the exact distance,
 // so a child the ray really enters is never culled (traversal/cwbvh_traverse.h has the bound; the
 // builder's quantization guarantees the decoded box contains the true one).
-// Children are ordered by `order` (the values of mbvh8_single's, plus octant): branching (default)
-// enters a single entered child directly and compares two, and sorts three or more with the
-// bitonic network on distance keys; sort takes the network for every node; auto is mbvh8_single's
-// default (branching for common-origin batches, sort otherwise). mbvh8_single needs sort on bounce
-// rays, where the branches mispredict; cwbvh_single's longer node test hides them: branching
-// was faster on bounce:2 too (512x512, 5 alternating runs each, median Mrays/s sort -> branching:
-// spheres:2M 0.522 -> 0.562, crytek 1.065 -> 1.081), and on primary rays (callgrind, crytek
-// 128x128: 2431 -> 2168 instructions per ray; docs/PERFORMANCE.md, session 9).
+// Children are ordered by `order` (the values of mbvh8_single's, plus octant): branching enters a
+// single entered child directly and compares two, and sorts three or more with the bitonic
+// network on distance keys; sort takes the network for every node; auto (default, as
+// mbvh8_single's) is branching for common-origin batches and sort otherwise. Session 9 measured
+// branching faster on bounce:2 too (spheres:2M 0.522 -> 0.562 Mrays/s, crytek 1.065 -> 1.081) and
+// on primary rays (callgrind, crytek 128x128: 2431 -> 2168 instructions per ray); after the
+// branch-free node and leaf changes since, sort is the faster on bounce:2: sort / branching 1.03 to
+// 1.08 on crytek, sibenik, bunny, conference and dragon_100k (session 22, one interleaved process
+// per scene, 2 rounds), and with `prefetch` (the second-nearest child fetched early on structures
+// beyond llc_mib, as mbvh8_single) 1.07-1.11 on spheres:1M and 2M (docs/PERFORMANCE.md, session 22).
 // octant takes the builder's octant-ordered slots (Ylitie et al. 2017 §3.2/§4; structures/cwbvh.h):
 // the entered slots, read in the order slot ^ ray octant, are approximately near to far, so one
 // table lookup (kCWOctantOrder) gives the push order and the child to enter, no sort. Not the
@@ -38,7 +40,9 @@ namespace {
 
 constexpr MBVHDefaults kDefaults = kMBVH8Defaults;  // compresses mbvh8_single's cached tree
 
-enum class CWOrder { branching, sort, octant };
+// sort_prefetch: sort, and the second-nearest entered child's node or first block lines fetched
+// after the push (as mbvh8_single's ChildOrder::sort_prefetch; `prefetch`).
+enum class CWOrder { branching, sort, sort_prefetch, octant };
 
 template <CWOrder O, bool ExpAdd, class P>
 void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, MBVHStackEntry* stack, P& probe) {
@@ -75,7 +79,17 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
           push_in_order8(refs, tn, _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(int64_t(order))), stack + sp);
           cur = cw_child_ref(nd, uint32_t(order >> (8 * (count - 1))) & 7);
         } else {
-          push_sorted8(refs, tn, entered, count, stack + sp);
+          if constexpr (O == CWOrder::sort_prefetch) {
+            uint32_t second;
+            push_sorted8(refs, tn, entered, count, stack + sp, &second);
+            prefetch_node_or_block(
+                reinterpret_cast<const char*>(nodes) + size_t(second & ~mbvh_ref::kLeaf) * sizeof(CWNode),
+                reinterpret_cast<const char*>(t.blocks.data()) +
+                    size_t(mbvh_ref::first_block(cw_leaf_to_mbvh(second))) * sizeof(TriBlock<8>),
+                mbvh_ref::is_leaf(second));
+          } else {
+            push_sorted8(refs, tn, entered, count, stack + sp);
+          }
           alignas(32) uint32_t ref[8];
           _mm256_store_si256(reinterpret_cast<__m256i*>(ref), refs);
           cur = ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
@@ -108,6 +122,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   void prepare(const Scene& scene, StructureCache& cache) override {
     const MBVHData<8, 8> m = fetch_mbvh<8, 8>(scene, cache, params_, TriKernel::watertight);
     cw_ = cache.get<CWBVH>(params_.key(8, 8), [&] { return CWBVH::compress(*m.mbvh); });
+    prefetch_ = prefetch_second_child(cfg_, memory().total());
   }
   std::string structure_info() const override { return cw_->stats.describe(); }
   StructureBytes memory() const override { return {cw_->stats.node_bytes, cw_->stats.tri_bytes}; }
@@ -117,8 +132,9 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
     const CWBVH& t = *cw_;
     std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
     const CWOrder order = order_ == OrderParam::octant ? CWOrder::octant
-                          : sorts_batch(order_, batch)    ? CWOrder::sort
-                                                          : CWOrder::branching;
+                          : !sorts_batch(order_, batch)   ? CWOrder::branching
+                          : prefetch_                     ? CWOrder::sort_prefetch
+                                                          : CWOrder::sort;
     const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
       if (t.blocks.empty()) return;  // an empty scene: nothing to hit
@@ -136,6 +152,8 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
         go.template operator()<CWOrder::branching>();
       } else if (order == CWOrder::sort) {
         go.template operator()<CWOrder::sort>();
+      } else if (order == CWOrder::sort_prefetch) {
+        go.template operator()<CWOrder::sort_prefetch>();
       } else {
         go.template operator()<CWOrder::octant>();
       }
@@ -147,6 +165,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   MBVHBuildParams params_;
   std::shared_ptr<const CWBVH> cw_;
   OrderParam order_;
+  bool prefetch_ = false;  // sorted batches take CWOrder::sort_prefetch (decided in prepare)
 };
 
 }  // namespace
@@ -155,10 +174,12 @@ std::unique_ptr<Traverser> make_cwbvh_single(const SchemeConfig& cfg) { return s
 ParamSpecs params_cwbvh_single() {
   ParamSpecs specs = mbvh_param_specs(kDefaults);
   param_named(specs, "small") = int_choice_param("small", 0, {0}, "always 0: the compressed layout holds 8-wide blocks only");
-  return specs + ParamSpecs{choice_param("order", "branching", {"branching", "sort", "auto", "octant"},
-                                         "child order: branching, sort = sort_always (as mbvh8_single's ChildOrder), "
-                                         "auto = branching for common-origin batches, sort otherwise; octant = the "
-                                         "layout's octant-ordered slots (slot ^ ray octant, a table lookup, no sort)")};
+  return specs +
+         ParamSpecs{choice_param("order", "auto", {"branching", "sort", "auto", "octant"},
+                                 "child order: branching, sort = sort_always (as mbvh8_single's ChildOrder), "
+                                 "auto = branching for common-origin batches, sort otherwise; octant = the "
+                                 "layout's octant-ordered slots (slot ^ ray octant, a table lookup, no sort)")} +
+         prefetch_param_specs();
 }
 
 }  // namespace tb

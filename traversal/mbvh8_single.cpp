@@ -43,13 +43,11 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
   // tri_width=4: layout 0, 8: layout 1.
   explicit MBVH8Single(const SchemeConfig& cfg)
       : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1),
-        order_(parse_order_param(cfg.get_choice("order"))),
-        prefetch_param_(cfg.get_choice("prefetch")),
-        llc_bytes_(size_t(cfg.get_int("llc_mib")) << 20) {}
+        order_(parse_order_param(cfg.get_choice("order"))) {}
   std::string_view name() const override { return "mbvh8_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     MBVHScheme::prepare(scene, cache);
-    prefetch_ = prefetch_param_ == "on" || (prefetch_param_ == "auto" && memory().total() > llc_bytes_);
+    prefetch_ = prefetch_second_child(cfg_, memory().total());
   }
 
   template <class P>
@@ -76,8 +74,6 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
 
  private:
   OrderParam order_;
-  std::string prefetch_param_;
-  size_t llc_bytes_;
   bool prefetch_ = false;  // sort_always batches take ChildOrder::sort_prefetch (decided in prepare)
 };
 
@@ -89,13 +85,8 @@ ParamSpecs params_mbvh8_single() {
          ParamSpecs{int_choice_param("tri_width", 8, {4, 8}, "triangles per leaf block: 4 (SSE) or 8 (AVX2)"),
                     choice_param("order", "auto", {"auto", "sort", "branching"},
                                  "child order (ChildOrder, watertight 8-wide blocks): sort = sort_always, branching, "
-                                 "auto = branching for common-origin batches, sort_always otherwise"),
-                    choice_param("prefetch", "auto", {"auto", "on", "off"},
-                                 "sorted batches fetch the second-nearest entered child early (ChildOrder::sort_prefetch): "
-                                 "on, off, or auto = when the nodes and blocks exceed llc_mib"),
-                    int_param("llc_mib", 32, 1, 1 << 20,
-                              "the last-level cache prefetch=auto compares the structure's bytes with, in MiB "
-                              "(default: the reference machine's, a Zen 3 CCX's 32 MiB L3)")};
+                                 "auto = branching for common-origin batches, sort_always otherwise")} +
+         prefetch_param_specs();
 }
 
 }  // namespace tb

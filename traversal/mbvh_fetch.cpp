@@ -24,6 +24,20 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
                                   : int_choice_param("small", 0, {0}, "always 0: this scheme's leaves are 4-wide blocks")};
 }
 
+ParamSpecs prefetch_param_specs() {
+  return {choice_param("prefetch", "auto", {"auto", "on", "off"},
+                       "sorted batches fetch the second-nearest entered child early: on, off, or auto = when the "
+                       "nodes and triangle blocks exceed llc_mib"),
+          int_param("llc_mib", 32, 1, 1 << 20,
+                    "the last-level cache prefetch=auto compares the structure's bytes with, in MiB (default: the "
+                    "reference machine's, a Zen 3 CCX's 32 MiB L3)")};
+}
+
+bool prefetch_second_child(const SchemeConfig& cfg, size_t bytes) {
+  const std::string mode = cfg.get_choice("prefetch");
+  return mode == "on" || (mode == "auto" && bytes > (size_t(cfg.get_int("llc_mib")) << 20));
+}
+
 MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
   MBVHBuildParams p;
   p.bvh = bvh_params(cfg);

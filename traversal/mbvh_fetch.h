@@ -39,6 +39,14 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d);
 // Reads them; a parameter declared with auto_default() (its default depends on another, as
 // mbvh_rs's merge and collapse on its width) takes its value from `d`.
 MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d);
+// `prefetch` (auto | on | off) and `llc_mib` of the single-ray schemes whose sorted batches may
+// fetch the second-nearest entered child early (mbvh8_single: ChildOrder::sort_prefetch;
+// cwbvh_single): that pays where the structure does not fit the last-level cache and costs where
+// it does (docs/PERFORMANCE.md, session 22), so `auto` compares the structure's bytes with
+// llc_mib. A parameter rather than a query: this VM's sysconf and CPUID report a 508 MiB L3.
+ParamSpecs prefetch_param_specs();
+// Whether a structure of `bytes` (nodes and triangle blocks) gets the early fetch under `cfg`.
+bool prefetch_second_child(const SchemeConfig& cfg, size_t bytes);
 // Fetches (building on first use; the collapse fetches the binary BVH through the cache too) the
 // MBVH and, for the scalar kernels, its triangles in lane order.
 template <int N, int W>

@@ -347,12 +347,17 @@ inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
 // the address chosen by a select instead of a branch (ChildOrder::sort_prefetch: the stack top after
 // a push is a node or a leaf unpredictably). A leaf of the `small` array fetches the lines of the
 // `blocks` entry with its index instead: harmless, and small leaves are off by default.
+// The four lines from `node` or, for a leaf, from `block` (cwbvh_single's sorted batches too).
+[[gnu::always_inline]] inline void prefetch_node_or_block(const char* node, const char* block, bool leaf) {
+  const char* p = leaf ? block : node;
+  for (size_t l = 0; l < 256; l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
+}
 template <int N, int W>
 [[gnu::always_inline]] inline void prefetch_top(const MBVH<N, W>& m, uint32_t ref) {
-  const char* node = reinterpret_cast<const char*>(m.nodes.data()) + size_t(ref & ~mbvh_ref::kLeaf) * sizeof(MBVHNode<N>);
-  const char* block = reinterpret_cast<const char*>(m.blocks.data()) + size_t(mbvh_ref::first_block(ref)) * sizeof(TriBlock<W>);
-  const char* p = mbvh_ref::is_leaf(ref) ? block : node;
-  for (size_t l = 0; l < 256; l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
+  prefetch_node_or_block(
+      reinterpret_cast<const char*>(m.nodes.data()) + size_t(ref & ~mbvh_ref::kLeaf) * sizeof(MBVHNode<N>),
+      reinterpret_cast<const char*>(m.blocks.data()) + size_t(mbvh_ref::first_block(ref)) * sizeof(TriBlock<W>),
+      mbvh_ref::is_leaf(ref));
 }
 
 struct MBVHStackEntry {
