@@ -572,6 +572,27 @@ TEST(MBVH, ParametersAreValidated) {
   }
 }
 
+// `prefetch=auto` turns the second-child prefetch on exactly when the structure's bytes exceed
+// llc_mib (the room's tree is a few MiB), and structure_info() says which variant runs.
+TEST(MBVH, PrefetchAutoComparesTheStructureWithTheLastLevelCache) {
+  Bench& bench = room_bench();
+  for (const char* scheme : {"mbvh8_single", "cwbvh_single"}) {
+    const auto info = [&](const std::map<std::string, std::string>& params) {
+      SchemeConfig cfg;
+      for (const auto& [k, v] : params) cfg.params[k] = v;
+      auto t = make_scheme(scheme, cfg);
+      t->prepare(bench.scene(), bench.cache());
+      EXPECT_LT(t->structure_bytes(), size_t(32) << 20) << scheme;
+      return t->structure_info();
+    };
+    const std::string on = "second child prefetched", off = "no second-child prefetch";
+    EXPECT_NE(info({}).find(off), std::string::npos) << scheme;
+    EXPECT_NE(info({{"llc_mib", "1"}}).find(on), std::string::npos) << scheme;
+    EXPECT_NE(info({{"prefetch", "on"}}).find(on), std::string::npos) << scheme;
+    EXPECT_NE(info({{"prefetch", "off"}, {"llc_mib", "1"}}).find(off), std::string::npos) << scheme;
+  }
+}
+
 TEST(MBVH, EveryKernelVariantRuns) {
   Bench& bench = room_bench();
   const WorkloadSpec spec = test::small_spec("bounce:1", 64);

@@ -124,7 +124,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
     cw_ = cache.get<CWBVH>(params_.key(8, 8), [&] { return CWBVH::compress(*m.mbvh); });
     prefetch_ = prefetch_second_child(cfg_, memory().total());
   }
-  std::string structure_info() const override { return cw_->stats.describe(); }
+  std::string structure_info() const override { return cw_->stats.describe() + prefetch_info(prefetch_); }
   StructureBytes memory() const override { return {cw_->stats.node_bytes, cw_->stats.tri_bytes}; }
 
   template <class P>

@@ -49,6 +49,7 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
     MBVHScheme::prepare(scene, cache);
     prefetch_ = prefetch_second_child(cfg_, memory().total());
   }
+  std::string structure_info() const override { return MBVHScheme::structure_info() + prefetch_info(prefetch_); }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {

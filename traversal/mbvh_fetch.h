@@ -47,6 +47,10 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d);
 ParamSpecs prefetch_param_specs();
 // Whether a structure of `bytes` (nodes and triangle blocks) gets the early fetch under `cfg`.
 bool prefetch_second_child(const SchemeConfig& cfg, size_t bytes);
+// What structure_info() appends so the build table and logs say which variant runs.
+inline std::string prefetch_info(bool on) {
+  return on ? ", second child prefetched (sorted batches)" : ", no second-child prefetch";
+}
 // Fetches (building on first use; the collapse fetches the binary BVH through the cache too) the
 // MBVH and, for the scalar kernels, its triangles in lane order.
 template <int N, int W>
