@@ -12,7 +12,7 @@ import csv
 import sys
 from collections import defaultdict
 
-SINGLE = ["bvh_single", "mbvh4_single", "mbvh8_single", "kd_single"]
+SINGLE = ["bvh_single", "mbvh4_single", "mbvh8_single", "cwbvh_single", "kd_single"]
 BATCH = ["mbvh_rs", "raygrid"]
 PACKET = ["bvh_masked", "bvh_ranged", "bvh_partition", "mbvh8_packet", "kd_packet"]
 
