@@ -83,9 +83,9 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
             uint32_t second;
             push_sorted8(refs, tn, entered, count, stack + sp, &second);
             prefetch_node_or_block(
-                reinterpret_cast<const char*>(nodes) + size_t(second & ~mbvh_ref::kLeaf) * sizeof(CWNode),
-                reinterpret_cast<const char*>(t.blocks.data()) +
-                    size_t(mbvh_ref::first_block(cw_leaf_to_mbvh(second))) * sizeof(TriBlock<8>),
+                reinterpret_cast<uintptr_t>(nodes) + uintptr_t(second & ~mbvh_ref::kLeaf) * sizeof(CWNode),
+                reinterpret_cast<uintptr_t>(t.blocks.data()) +
+                    uintptr_t(mbvh_ref::first_block(cw_leaf_to_mbvh(second))) * sizeof(TriBlock<8>),
                 mbvh_ref::is_leaf(second));
           } else {
             push_sorted8(refs, tn, entered, count, stack + sp);

@@ -343,21 +343,24 @@ inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
   for (size_t l = 0; l < sizeof(MBVHNode<N>); l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
 }
 
-// Starts fetching the first four lines of what `ref` names, a node or a leaf's first block, with
-// the address chosen by a select instead of a branch (ChildOrder::sort_prefetch: the stack top after
-// a push is a node or a leaf unpredictably). A leaf of the `small` array fetches the lines of the
-// `blocks` entry with its index instead: harmless, and small leaves are off by default.
-// The four lines from `node` or, for a leaf, from `block` (cwbvh_single's sorted batches too).
-[[gnu::always_inline]] inline void prefetch_node_or_block(const char* node, const char* block, bool leaf) {
-  const char* p = leaf ? block : node;
-  for (size_t l = 0; l < 256; l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
+// Starts fetching the four lines at `node` or, for a leaf, at `block`, the address chosen by a
+// select instead of a branch (the stack top after a push is a node or a leaf unpredictably).
+// Addresses as integers: the one not chosen may lie outside its array (a leaf's reference read as
+// a node index), as may the lines past a small record, and none is formed as a pointer. ChildOrder::sort_prefetch, cwbvh_single's
+// sorted batches.
+[[gnu::always_inline]] inline void prefetch_node_or_block(uintptr_t node, uintptr_t block, bool leaf) {
+  const uintptr_t a = leaf ? block : node;
+  for (uintptr_t l = 0; l < 256; l += 64) _mm_prefetch(reinterpret_cast<const char*>(a + l), _MM_HINT_T0);
 }
+// The same for the MBVH reference `ref`: a node, or a leaf's first block. A leaf of the `small`
+// array fetches the lines of the `blocks` entry with its index instead: harmless, and small
+// leaves are off by default.
 template <int N, int W>
 [[gnu::always_inline]] inline void prefetch_top(const MBVH<N, W>& m, uint32_t ref) {
-  prefetch_node_or_block(
-      reinterpret_cast<const char*>(m.nodes.data()) + size_t(ref & ~mbvh_ref::kLeaf) * sizeof(MBVHNode<N>),
-      reinterpret_cast<const char*>(m.blocks.data()) + size_t(mbvh_ref::first_block(ref)) * sizeof(TriBlock<W>),
-      mbvh_ref::is_leaf(ref));
+  prefetch_node_or_block(reinterpret_cast<uintptr_t>(m.nodes.data()) + uintptr_t(ref & ~mbvh_ref::kLeaf) * sizeof(MBVHNode<N>),
+                         reinterpret_cast<uintptr_t>(m.blocks.data()) +
+                             uintptr_t(mbvh_ref::first_block(ref)) * sizeof(TriBlock<W>),
+                         mbvh_ref::is_leaf(ref));
 }
 
 struct MBVHStackEntry {
