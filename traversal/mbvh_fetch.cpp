@@ -28,7 +28,7 @@ ParamSpecs prefetch_param_specs() {
   return {choice_param("prefetch", "auto", {"auto", "on", "off"},
                        "sorted batches fetch the second-nearest entered child early: on, off, or auto = when the "
                        "nodes and triangle blocks exceed llc_mib"),
-          int_param("llc_mib", 32, 1, 1 << 20,
+          int_param("llc_mib", 32, 1, 65536,
                     "the last-level cache prefetch=auto compares the structure's bytes with, in MiB (default: the "
                     "reference machine's, a Zen 3 CCX's 32 MiB L3)")};
 }
