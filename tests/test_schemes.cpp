@@ -167,6 +167,15 @@ TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
     c.params[key] = value;
     EXPECT_NO_THROW(make_scheme(scheme, c)) << scheme << " " << key << "=" << value;
   }
+  // The refusal names the range in full (not 1.04858e+06 for 2^20).
+  SchemeConfig c;
+  c.params["rays_in_flight"] = "0";
+  try {
+    make_scheme("treelet_queue", c);
+    ADD_FAILURE() << "rays_in_flight=0 accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("integer in [1, 1048576]"), std::string::npos) << e.what();
+  }
 }
 
 // The split_* parameters steer spatial splits only: without them (spatial=0, the binary BVH

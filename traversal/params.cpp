@@ -75,7 +75,8 @@ std::string ParamSpec::type_text() const {
     for (const auto& a : allowed) s += (s.empty() ? "" : "|") + a;
     return s;
   }
-  return "integer in [" + number_text(lo) + ", " + number_text(hi) + "]";
+  // Integer bounds in full (%g printed 2^20 as 1.04858e+06).
+  return "integer in [" + std::to_string(static_cast<long long>(lo)) + ", " + std::to_string(static_cast<long long>(hi)) + "]";
 }
 
 void ParamSpec::check(const std::string& value) const {
