@@ -461,9 +461,11 @@ inline uint32_t min_key8(__m256i k) {
 //    second-nearest entered child: prefetch_top). That child is visited after the nearest one's
 //    subtree, so the fetch pays only where that subtree's visit does not evict it and the node
 //    would otherwise come from memory: trees larger than the last-level cache. Measured on
-//    bounce:2 (docs/PERFORMANCE.md, session 21): spheres:1000000 +5.5%, spheres:2000000 +3%, but
-//    sibenik -4.8% and dragon_100k -2.2%, whose trees stay cached; mbvh8_single's `prefetch`
-//    parameter chooses it by the structure's bytes.
+//    bounce:2, on / off (docs/PERFORMANCE.md, session 22): spheres:500000 to 2000000 (33-132 MiB)
+//    +5 to +11%, but 0.91-0.99 on the scenes whose trees stay cached (sibenik and dragon_100k
+//    0.96, stadium 0.91); mbvh8_single's and cwbvh_single's `prefetch` parameter chooses it by the
+//    structure's bytes. (Session 21's form read the reference back from the stack entry just
+//    stored, a store-forwarding stall: 9-12% slower on cached scenes, no gain anywhere.)
 enum class ChildOrder { branching, sort_always, sort_prefetch };
 constexpr bool sorts_always(ChildOrder o) { return o != ChildOrder::branching; }
 
