@@ -65,27 +65,36 @@ uint8_t cw_quantize_hi(float p, float s, float hi) {
 std::string CWBVHStats::describe() const {
   char buf[256];
   std::snprintf(buf, sizeof buf,
-                "nodes=%u leaves=%u blocks=%u max_depth=%u avg_children=%.2f bytes_per_node=%zu node_bytes=%zu "
+                "nodes=%u full_nodes=%u leaves=%u blocks=%u max_depth=%u avg_children=%.2f bytes_per_node=%zu node_bytes=%zu "
                 "tri_bytes=%zu box_growth=%.4f compress_ms=%.1f",
-                nodes, leaves, blocks, max_depth, avg_children, nodes ? node_bytes / nodes : size_t(0), node_bytes,
+                nodes, full_nodes, leaves, blocks, max_depth, avg_children, nodes ? node_bytes / nodes : size_t(0), node_bytes,
                 tri_bytes, box_growth, compress_ms);
   return buf;
 }
 
 bool CWBVH::slot_used(uint32_t node, int slot) const {
+  if (node & kCWFull) {
+    const MBVHNode<8>& f = full[node & ~kCWFull];
+    return f.box[0][slot] <= f.box[3][slot];
+  }
   const CWNode& n = nodes[node];
   return n.qlo[0][slot] <= n.qhi[0][slot] || (n.imask >> slot & 1);
 }
 
 AABB CWBVH::child_box(uint32_t node, int slot) const {
+  if (node & kCWFull) return full[node & ~kCWFull].child_box(slot);
   const FlushDenormals ftz;
   return decode_box(nodes[node], slot);
 }
 
 uint32_t CWBVH::child_ref(uint32_t node, int slot) const {
+  if (!slot_used(node, slot)) return 0;
+  if (node & kCWFull) {
+    const uint32_t r = full[node & ~kCWFull].ref[slot];
+    return mbvh_ref::is_leaf(r) ? cw_leaf_to_mbvh(r) : r;
+  }
   const CWNode& n = nodes[node];
   if (n.imask >> slot & 1) return n.child_base + n.meta[slot];
-  if (!slot_used(node, slot)) return 0;
   return cw_leaf_to_mbvh(n.leaf_base + n.meta[slot]);
 }
 
@@ -120,32 +129,121 @@ std::array<int8_t, 8> cw_octant_slots(const MBVHNode<8>& n) {
   return child;
 }
 
-CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
+namespace {
+
+// The MBVH nodes kept uncompressed (structures/cwbvh.h, "Uncompressed top"): the `budget` nodes of
+// largest box area, the root first and each node after its parent (a max-heap of the frontier;
+// ties to the lower node index).
+std::vector<uint8_t> full_top(const MBVH<8, 8>& m, size_t budget) {
+  std::vector<uint8_t> full(m.nodes.size(), 0);
+  std::vector<std::pair<float, uint32_t>> frontier;  // (area, node); the root's area is taken as +inf
+  if (budget && !m.nodes.empty()) frontier.push_back({INFINITY, 0});
+  const auto later = [](const auto& a, const auto& b) { return a.first < b.first || (a.first == b.first && a.second > b.second); };
+  for (size_t taken = 0; taken < budget && !frontier.empty(); ++taken) {
+    std::pop_heap(frontier.begin(), frontier.end(), later);
+    const uint32_t n = frontier.back().second;
+    frontier.pop_back();
+    full[n] = 1;
+    const MBVHNode<8>& nd = m.nodes[n];
+    for (uint32_t i = 0; i < nd.num_children; ++i) {
+      if (mbvh_ref::is_leaf(nd.ref[i])) continue;
+      frontier.push_back({nd.child_box(int(i)).area(), nd.ref[i]});
+      std::push_heap(frontier.begin(), frontier.end(), later);
+    }
+  }
+  return full;
+}
+
+}  // namespace
+
+std::array<int8_t, 8> cw_slots(const MBVHNode<8>& n, CWSlots slots) {
+  if (slots == CWSlots::octant) return cw_octant_slots(n);
+  std::array<int8_t, 8> child;
+  for (int i = 0; i < 8; ++i) child[size_t(i)] = i < int(n.num_children) ? int8_t(i) : int8_t(-1);
+  return child;
+}
+
+CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
   const auto t0 = std::chrono::steady_clock::now();
   if (m.small_leaf != 0 || !m.small.empty())
     throw std::invalid_argument("cwbvh: needs an MBVH8 with 8-wide blocks only (small=0)");
+  if (!(full_share >= 0 && full_share <= 1)) throw std::invalid_argument("cwbvh: full_share must be in [0, 1]");
   const FlushDenormals ftz;
   CWBVH out;
+  const std::vector<uint8_t> is_full = full_top(m, size_t(std::floor(full_share * double(m.nodes.size()))));
   out.nodes.reserve(m.nodes.size());
   out.blocks.reserve(m.blocks.size());
   struct Item {
-    uint32_t src, dst, depth;
+    uint32_t src, dst, depth;  // dst: index in out.full for a full node, in out.nodes otherwise
   };
   std::vector<Item> stack;
-  out.nodes.emplace_back();
+  if (!m.nodes.empty() && is_full[0]) {
+    out.full.emplace_back();
+    out.root = kCWFull;
+  } else {
+    out.nodes.emplace_back();
+  }
   if (!m.nodes.empty()) stack.push_back({0, 0, 1});
   double growth = 0;
   uint64_t growth_n = 0, children = 0;
   double bound[3] = {0, 0, 0};
   int e_min = 127, e_max = -128;
+  const auto copy_leaf = [&](uint32_t ref) {  // appends a leaf's blocks; returns its triangle count
+    const uint32_t ntris = mbvh_ref::num_tris(ref), nblocks = (ntris + 7) / 8;
+    if (ntris > 16) throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most 16: merge <= 16)");
+    for (uint32_t k = 0; k < nblocks; ++k) out.blocks.push_back(m.blocks[mbvh_ref::first_block(ref) + k]);
+    out.stats.leaves++;
+    return ntris;
+  };
   while (!stack.empty()) {
     const Item it = stack.back();
     stack.pop_back();
     const MBVHNode<8>& src = m.nodes[it.src];
-    CWNode n{};
     out.stats.max_depth = std::max(out.stats.max_depth, it.depth);
     const uint32_t nc = src.num_children;
     children += nc;
+    if (is_full[it.src]) {
+      // Float boxes, slots as the compressed nodes' (the octant order reads both kinds alike);
+      // children allocated one by one (a full node's references are explicit).
+      MBVHNode<8> f{};
+      f.num_children = nc;
+      const std::array<int8_t, 8> slot_child = cw_slots(src, slots);
+      const uint32_t first_block = uint32_t(out.blocks.size());
+      std::vector<Item> kids;
+      for (int i = 0; i < 8; ++i) {
+        const int c = slot_child[size_t(i)];
+        for (int a = 0; a < 3; ++a) f.box[a][i] = INFINITY, f.box[3 + a][i] = -INFINITY;
+        if (c < 0) continue;
+        const AABB b = src.child_box(c);
+        for (int a = 0; a < 3; ++a) {
+          f.box[a][i] = b.lo[a], f.box[3 + a][i] = b.hi[a];
+          bound[a] = std::max({bound[a], std::fabs(double(b.lo[a])), std::fabs(double(b.hi[a]))});
+        }
+        const uint32_t ref = src.ref[c];
+        if (mbvh_ref::is_leaf(ref)) {
+          const uint32_t at = uint32_t(out.blocks.size());
+          f.ref[i] = cw_leaf_ref(at, copy_leaf(ref));
+        } else if (is_full[ref]) {
+          f.ref[i] = kCWFull | uint32_t(out.full.size());
+          kids.push_back({ref, uint32_t(out.full.size()), it.depth + 1});
+          out.full.emplace_back();
+        } else {
+          f.ref[i] = uint32_t(out.nodes.size());
+          kids.push_back({ref, uint32_t(out.nodes.size()), it.depth + 1});
+          out.nodes.emplace_back();
+        }
+      }
+      if (out.blocks.size() >= kCWMaxBlocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
+      // Unused slots (never entered: their planes are infinite) still reference a real triangle.
+      for (int i = 0; i < 8; ++i)
+        if (slot_child[size_t(i)] < 0) f.ref[i] = cw_leaf_ref(out.blocks.size() > first_block ? first_block : 0, 1);
+      out.full[it.dst] = f;
+      for (auto k = kids.rbegin(); k != kids.rend(); ++k) stack.push_back(*k);
+      continue;
+    }
+    // A compressed node; its children are compressed too (full_top takes a node only after its
+    // parent).
+    CWNode n{};
     // The grid: origin at the union's lo corner, cell size so that 255 cells reach its hi.
     AABB u;
     for (uint32_t i = 0; i < nc; ++i) u.grow(src.child_box(int(i)));
@@ -159,7 +257,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
     const uint32_t first_block = uint32_t(out.blocks.size());
     uint32_t interior = 0, block_off = 0;
     std::vector<Item> kids;
-    const std::array<int8_t, 8> slot_child = cw_octant_slots(src);
+    const std::array<int8_t, 8> slot_child = cw_slots(src, slots);
     for (int i = 0; i < 8; ++i) {
       const int c = slot_child[size_t(i)];
       if (c < 0) {  // unused: lo > hi on every axis
@@ -177,13 +275,10 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
       }
       const uint32_t ref = src.ref[c];
       if (mbvh_ref::is_leaf(ref)) {
-        const uint32_t ntris = mbvh_ref::num_tris(ref), nblocks = (ntris + 7) / 8;
-        if (ntris > 16) throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most 16: merge <= 16)");
+        const uint32_t ntris = copy_leaf(ref), nblocks = (ntris + 7) / 8;
         if (block_off + nblocks > 16) throw std::invalid_argument("cwbvh: more than 16 leaf blocks under one node");
         n.meta[i] = uint8_t(block_off << 4 | (ntris - 1));
-        for (uint32_t k = 0; k < nblocks; ++k) out.blocks.push_back(m.blocks[mbvh_ref::first_block(ref) + k]);
         block_off += nblocks;
-        out.stats.leaves++;
       } else {
         n.imask |= uint8_t(1u << i);
         n.meta[i] = uint8_t(interior);
@@ -210,13 +305,15 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m) {
     if (double(out.coord_bound[a]) < bound[a]) out.coord_bound[a] = std::nextafter(out.coord_bound[a], INFINITY);
   }
   CWBVHStats& s = out.stats;
-  s.nodes = uint32_t(out.nodes.size());
+  s.nodes = uint32_t(out.nodes.size() + out.full.size());
+  s.full_nodes = uint32_t(out.full.size());
   s.blocks = uint32_t(out.blocks.size());
-  s.node_bytes = out.nodes.size() * sizeof(CWNode);
+  s.node_bytes = out.nodes.size() * sizeof(CWNode) + out.full.size() * sizeof(MBVHNode<8>);
   s.tri_bytes = out.blocks.size() * sizeof(TriBlock<8>);
   s.avg_children = s.nodes ? double(children) / s.nodes : 0;
   s.box_growth = growth_n ? growth / double(growth_n) : 0;
   move_to_huge_pages(out.nodes);
+  move_to_huge_pages(out.full);
   move_to_huge_pages(out.blocks);
   s.compress_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;

@@ -15,13 +15,33 @@
 // node's first block, block 0 where it has none), so a ray that a padded box test lets into an
 // unused slot only tests a triangle of the scene.
 //
-// Child slots are octant-ordered (Ylitie et al. 2017 §3.2, ordering the children for the
-// octant-aware fixed-order traversal of §4): the builder places the children so that, for a ray
-// whose direction has octant o (bit a set: component a negative, as kernels.h's plane rows), the
-// slots taken in the order k ^ o, k = 0..7, come approximately near to far (cw_octant_slots). A
-// traversal then gets a near-to-far order of the entered children from the octant alone, without
-// sorting their distances; children are interior nodes and leaf blocks in slot order. Leaves are the MBVH8's TriBlock<8> SoA blocks,
-// tested by the same watertight SIMD kernel.
+// Child slots (CWSlots): the MBVH8 node's child order (`mbvh`, for traversals that order the
+// entered children by distance), or octant-ordered (`octant`; Ylitie et al. 2017 §3.2, ordering
+// the children for the octant-aware fixed-order traversal of §4): the builder places the children
+// so that, for a ray whose direction has octant o (bit a set: component a negative, as kernels.h's
+// plane rows), the slots taken in the order k ^ o, k = 0..7, come approximately near to far
+// (cw_octant_slots). A traversal then gets a near-to-far order of the entered children from the
+// octant alone, without sorting their distances. Only that traversal gets octant slots: the
+// sorted and branching orders break ties of entry distance (keys equal but for their low 3 bits,
+// which hold the slot) by slot, and on the MBVH8's order they test fewer leaves: crytek_sponza_partial
+// 1.72 -> 1.56 leaves per primary ray, 3.20 -> 2.88 on bounce:2; sponza, conference and bunny
+// unchanged (128x128, every node compressed; docs/PERFORMANCE.md, session 23). Children are interior nodes
+// and leaf blocks in slot order. Leaves are the MBVH8's TriBlock<8> SoA blocks, tested by the same
+// watertight SIMD kernel.
+//
+// Uncompressed top (`full_share`, Benthin, Wald, Woop and Afra 2018, "Compressed-Leaf Bounding
+// Volume Hierarchies": compress where most of the memory is, keep full-precision nodes where most
+// of the visits are): the nodes of largest box area — the most likely to be entered, by the SAH's
+// geometric probability — may be kept as MBVH8 nodes (`full`, 256 bytes, float boxes) up to a
+// share of the node count, the rest compressed. The full nodes form a top of the tree (the root
+// first; a node's box contains its children's, so its area is at least theirs, and a node is taken
+// only after its parent). Their references: a full child is kCWFull | its index in `full`, a
+// compressed child its index in `nodes`, a leaf the compressed leaf reference (any block, no
+// 16-block limit), an unused slot an empty box (lo = +inf, hi = -inf) with a one-triangle leaf
+// reference. Children of compressed nodes are compressed. With 4% of the nodes full, node bytes
+// are 0.3125 + 0.04 * 0.6875 = 0.340 of the MBVH8's, and 73-85% of node visits take the
+// uncompressed test on crytek_sponza_partial, sponza and spheres:2M (primary and bounce:2;
+// docs/PERFORMANCE.md, session 23).
 //
 // Conservative quantization: a child's box decodes as lo = p + q_lo * 2^e, hi = p + q_hi * 2^e in
 // float, one fused multiply-add each in flush-to-zero mode (cw_decode); the builder picks q_lo as
@@ -57,7 +77,7 @@ struct alignas(16) CWNode {
 static_assert(sizeof(CWNode) == 80);
 
 struct CWBVHStats {
-  uint32_t nodes = 0, leaves = 0, blocks = 0, max_depth = 0;
+  uint32_t nodes = 0, full_nodes = 0, leaves = 0, blocks = 0, max_depth = 0;  // nodes: compressed and full
   size_t node_bytes = 0, tri_bytes = 0;
   double avg_children = 0;
   double box_growth = 0;  // mean (decoded child area / true child area) - 1, over children with area
@@ -65,12 +85,20 @@ struct CWBVHStats {
   std::string describe() const;
 };
 
+enum class CWSlots { mbvh, octant };
+
+// An interior reference to a full (uncompressed) node: kCWFull | index in CWBVH::full. Without
+// the bit an interior reference indexes CWBVH::nodes; leaves have mbvh_ref::kLeaf (bit 31).
+inline constexpr uint32_t kCWFull = 0x40000000u;
+
 struct CWBVH {
-  aligned_vector<CWNode> nodes;          // nodes[0] = root
+  aligned_vector<CWNode> nodes;          // compressed nodes (nodes[0] = root where `full` is empty)
+  aligned_vector<MBVHNode<8>> full;      // the uncompressed top (full[0] = root where not empty)
+  uint32_t root = 0;                     // reference of the root: 0 or kCWFull
   aligned_vector<TriBlock<8>> blocks;    // leaf triangles, each node's leaves contiguous
   CWBVHStats stats;
-  // Per axis an upper bound of |p| + 255 * 2^e over all nodes (so of every coordinate a node's
-  // grid can express), rounded up: the traversal's per-ray error bound of its fused plane
+  // Per axis an upper bound of |p| + 255 * 2^e over the compressed nodes (so of every coordinate a
+  // node's grid can express) and of every finite plane of a full node, rounded up: the traversal's per-ray error bound of its fused plane
   // distances is proportional to it (traversal/cwbvh_traverse.h).
   float coord_bound[3] = {0, 0, 0};
   // The least and the largest cell exponent e of any node and axis: the traversal forms
@@ -79,14 +107,18 @@ struct CWBVH {
   int e_min = 0, e_max = 0;
 
   // Re-lays out and quantizes an 8-wide MBVH with 8-wide blocks only (small_leaf = 0) and leaves
-  // of at most 16 triangles; throws std::invalid_argument otherwise.
-  static CWBVH compress(const MBVH<8, 8>& m);
-  // The decoded (conservative) box of slot i (cw_decode per coordinate).
+  // of at most 16 triangles; throws std::invalid_argument otherwise. full_share (0..1): the share
+  // of the nodes kept uncompressed (floor(full_share * nodes) of largest area, see above); slots:
+  // the child slot order of every node (see above).
+  static CWBVH compress(const MBVH<8, 8>& m, double full_share = 0, CWSlots slots = CWSlots::octant);
+  // Of a node given by its CWBVH reference: slot i's box — decoded (conservative; cw_decode per
+  // coordinate) for a compressed node, the stored float box for a full one.
   AABB child_box(uint32_t node, int slot) const;
-  // Slot i's child in the MBVH reference format (mbvh_ref: interior = node index, leaf = first
-  // block and triangle count), or 0 for an unused slot of a node with no such child.
+  // Slot i's child in the MBVH reference format (mbvh_ref: leaf = first block and triangle count),
+  // interior children as CWBVH references (index in `nodes`, or kCWFull | index in `full`), 0 for
+  // an unused slot of a node with no such child. `node` is a CWBVH reference (either kind).
   uint32_t child_ref(uint32_t node, int slot) const;
-  bool slot_used(uint32_t node, int slot) const;
+  bool slot_used(uint32_t node, int slot) const;  // either kind of reference
 };
 
 // The slot assignment of one node (slot -> child index of the MBVH node, -1: unused), exposed for
@@ -95,6 +127,8 @@ struct CWBVH {
 // ((-1)^(s>>a&1) per axis a); the assignment of least total cost is approximated greedily: the
 // pair (child, free slot) of least cost first, ties to the lower child and slot index.
 std::array<int8_t, 8> cw_octant_slots(const MBVHNode<8>& n);
+// The slot assignment compress uses: cw_octant_slots, or the MBVH node's own order.
+std::array<int8_t, 8> cw_slots(const MBVHNode<8>& n, CWSlots slots);
 
 // The compressed leaf reference: kLeaf | first block << 4 | (triangles - 1), at most 16 triangles
 // and 2^27 blocks. cw_leaf_to_mbvh gives the MBVH reference the leaf kernels take.

@@ -1,7 +1,8 @@
 // Compressed wide BVH (Ylitie et al. 2017; CS348K lecture 18): quantized child boxes always
 // contain the true boxes (offsets up to 1e6, flat and near-zero children, flush-to-zero mode as
 // in the traversal), unused slots can never be entered, the compressed tree has the MBVH8's
-// topology and leaves, and its nodes take at most 0.35x the MBVH8's bytes.
+// topology and leaves (also with an uncompressed top), and its nodes take at most 0.35x the
+// MBVH8's bytes.
 #include <immintrin.h>
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include "structures/builtin_scenes.h"
 #include "structures/cwbvh.h"
 #include "traversal/cwbvh_traverse.h"
+#include "traversal/mbvh_traverse.h"
 #include "test_geometry.h"
 #include "test_util.h"
 #include "workloads/hard_cases.h"
@@ -183,6 +185,19 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
             ASSERT_EQ(std::memcmp(adds, tns, sizeof adds), 0);
             ++exp_add_rays;
           }
+          // The same children as a full node (float boxes) under the MBVH node test with the
+          // compressed ray's constants (t.bound covers the boxes' planes), as cwbvh_single's
+          // uncompressed top takes them.
+          MBVHNode<8> full{};
+          for (int i = 0; i < 8; ++i)
+            for (int a = 0; a < 3; ++a) {
+              full.box[a][i] = i < t.used ? t.box[i].lo[a] : INFINITY;
+              full.box[3 + a][i] = i < t.used ? t.box[i].hi[a] : -INFINITY;
+            }
+          __m256 ftn;
+          const int fmask = _mm256_movemask_ps(box_test<8>(full, cw_full_ray(r), tfar, ftn));
+          alignas(32) float ftns[8];
+          _mm256_store_ps(ftns, ftn);
           for (int i = 0; i < t.used; ++i) {
             long double t0, t1;
             ++checked;
@@ -191,6 +206,9 @@ TEST(CWBVH, FusedNodeTestIsConservative) {
             ASSERT_TRUE(mask >> i & 1) << "a child the ray enters was culled: offset " << offset << " scale " << scale
                                        << " slot " << i << " exact [" << double(t0) << ", " << double(t1) << "]";
             ASSERT_LE((long double)tns[i], t0) << "entry distance above the exact one";
+            ASSERT_TRUE(fmask >> i & 1) << "a full node's child the ray enters was culled: offset " << offset
+                                        << " scale " << scale << " slot " << i;
+            ASSERT_LE((long double)ftns[i], t0) << "full node: entry distance above the exact one";
             if (!unpadded_enters(t, i, o, d, tmin, tfar)) ++unpadded_misses;
           }
         }
@@ -252,17 +270,17 @@ MBVH<8, 8> mbvh8_of(const Scene& s) {
   return MBVH<8, 8>::collapse(s, BVH::build(s, p.bvh), p);
 }
 
-// Walks both trees in step: the same children in the slots cw_octant_slots assigns (each child in
+// Walks both trees in step: the same children in the slots cw_slots assigns (each child in
 // exactly one), decoded boxes containing the MBVH8's, identical leaf blocks.
-void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c) {
-  std::vector<std::pair<uint32_t, uint32_t>> stack{{0, 0}};
+void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c, CWSlots slots) {
+  std::vector<std::pair<uint32_t, uint32_t>> stack{{0, c.root}};  // (MBVH node, CWBVH reference)
   uint32_t visited = 0;
   while (!stack.empty()) {
     const auto [mi, ci] = stack.back();
     stack.pop_back();
     ++visited;
     const MBVHNode<8>& mn = m.nodes[mi];
-    const std::array<int8_t, 8> slot_child = cw_octant_slots(mn);
+    const std::array<int8_t, 8> slot_child = cw_slots(mn, slots);
     uint32_t seen = 0;
     for (int i = 0; i < 8; ++i) {
       const int ch = slot_child[size_t(i)];
@@ -275,7 +293,7 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c) {
         ASSERT_FALSE(c.slot_used(ci, i));
         // The reference the traversal forms for it is a real one-triangle leaf (a padded box test
         // may let a ray into an unused slot of a tiny node).
-        const uint32_t raw = c.nodes[ci].leaf_base + c.nodes[ci].meta[i];
+        const uint32_t raw = (ci & kCWFull) ? c.full[ci & ~kCWFull].ref[i] : c.nodes[ci].leaf_base + c.nodes[ci].meta[i];
         ASSERT_TRUE(mbvh_ref::is_leaf(raw));
         EXPECT_EQ(mbvh_ref::num_tris(cw_leaf_to_mbvh(raw)), 1u);
         EXPECT_LT(mbvh_ref::first_block(cw_leaf_to_mbvh(raw)), c.blocks.size());
@@ -293,6 +311,8 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c) {
       const uint32_t mr = mn.ref[ch], cr = c.child_ref(ci, i);
       ASSERT_EQ(mbvh_ref::is_leaf(mr), mbvh_ref::is_leaf(cr));
       if (!mbvh_ref::is_leaf(mr)) {
+        // The full nodes are a top: a compressed node has compressed children only.
+        if (!(ci & kCWFull)) ASSERT_FALSE(cr & kCWFull) << "a full node below a compressed one";
         stack.push_back({mr, cr});
         continue;
       }
@@ -306,8 +326,24 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c) {
     }
     ASSERT_EQ(seen, (1u << mn.num_children) - 1) << "a child without a slot";
   }
-  EXPECT_EQ(visited, c.nodes.size());
-  EXPECT_EQ(m.nodes.size(), c.nodes.size());
+  EXPECT_EQ(visited, c.nodes.size() + c.full.size());
+  EXPECT_EQ(m.nodes.size(), c.nodes.size() + c.full.size());
+}
+
+// The full nodes are the largest boxes: none of the compressed children of a full node (the
+// frontier the builder stopped at) has a larger area than a full node other than the root.
+void check_full_top_is_largest(const CWBVH& c) {
+  float least_full = INFINITY, largest_frontier = 0;
+  for (uint32_t f = 0; f < c.full.size(); ++f)
+    for (int i = 0; i < 8; ++i) {
+      if (!c.slot_used(kCWFull | f, i)) continue;
+      const uint32_t r = c.child_ref(kCWFull | f, i);
+      if (mbvh_ref::is_leaf(r)) continue;
+      const float a = c.full[f].child_box(i).area();
+      if (r & kCWFull) least_full = std::min(least_full, a);
+      else largest_frontier = std::max(largest_frontier, a);
+    }
+  EXPECT_LE(largest_frontier, least_full) << "a compressed node larger than a full one";
 }
 
 Scene flat_grid(Vec3 offset) {
@@ -333,12 +369,23 @@ TEST(CWBVH, SameTreeConservativeBoxesAndCompressed) {
   for (const Scene& s : scenes) {
     SCOPED_TRACE(s.name);
     const MBVH<8, 8> m = mbvh8_of(s);
-    const CWBVH c = CWBVH::compress(m);
-    check_same_tree(m, c);
-    EXPECT_LE(double(c.stats.node_bytes), 0.35 * double(m.stats.node_bytes));
-    EXPECT_EQ(c.stats.blocks, m.blocks.size());
-    EXPECT_LT(c.stats.box_growth, 0.2) << "quantized boxes far larger than the true ones";
+    // Every node compressed, cwbvh_single's default uncompressed top (full_top = 4 percent), the
+    // most the 0.35x goal allows (5%), and every node full.
+    for (double share : {0.0, 0.04, 0.05, 1.0}) {
+      SCOPED_TRACE(share);
+      const CWSlots slots = share == 0.04 ? CWSlots::mbvh : CWSlots::octant;  // cwbvh_single's default: mbvh
+      const CWBVH c = CWBVH::compress(m, share, slots);
+      check_same_tree(m, c, slots);
+      check_full_top_is_largest(c);
+      EXPECT_EQ(c.full.size(), size_t(std::floor(share * double(m.nodes.size()))));
+      EXPECT_EQ(c.root, c.full.empty() ? 0u : kCWFull);
+      if (share <= 0.05) EXPECT_LE(double(c.stats.node_bytes), 0.35 * double(m.stats.node_bytes));
+      EXPECT_EQ(c.stats.node_bytes, c.nodes.size() * sizeof(CWNode) + c.full.size() * sizeof(MBVHNode<8>));
+      EXPECT_EQ(c.stats.blocks, m.blocks.size());
+      if (share < 1) EXPECT_LT(c.stats.box_growth, 0.2) << "quantized boxes far larger than the true ones";
+    }
   }
+  EXPECT_THROW(CWBVH::compress(mbvh8_of(scenes[0]), 1.5), std::invalid_argument);
 }
 
 // Octant-ordered slots (Ylitie et al. 2017 §3.2): with one child in each octant of the node,
@@ -373,10 +420,15 @@ TEST(CWBVH, OctantSlotsPutTheFirstEnteredChildInTheOctantsSlot) {
 // work, never the result: as accurate as the reference allows, no leak on the must-hit hard cases,
 // also at offsets.
 TEST(CWBVH, EveryChildOrderIsAccurateAndWatertight) {
-  for (const std::string order : {"sort", "branching", "octant", "sort+prefetch"}) {
+  // Each order on the default uncompressed top (full_top=4), and the two ends of full_top.
+  for (const std::string order : {"sort", "branching", "octant", "sort+prefetch", "full_top=0", "full_top=100",
+                                  "octant,full_top=0"}) {
     SchemeConfig cfg;
-    cfg.params["order"] = order == "sort+prefetch" ? "sort" : order;
+    cfg.params["order"] = order == "sort+prefetch" ? "sort" : order.starts_with("octant") ? "octant" : order;
     if (order == "sort+prefetch") cfg.params["prefetch"] = "on";  // CWOrder::sort_prefetch
+    if (order.starts_with("full_top")) cfg.params.erase("order");
+    if (order.ends_with("full_top=0")) cfg.params["full_top"] = "0";
+    if (order.ends_with("full_top=100")) cfg.params["full_top"] = "100";
     for (const std::string scene : {"room", "sphere", "sphere@148376,1234,-223423"}) {
       Bench& bench = test::bench_for(scene);
       for (const char* w : {"primary", "rnd", "bounce:2"}) {

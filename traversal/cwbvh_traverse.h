@@ -49,6 +49,7 @@
 
 #include "structures/cwbvh.h"
 #include "traversal/kernels.h"
+#include "traversal/mbvh_traverse.h"
 
 namespace tb {
 
@@ -93,13 +94,22 @@ struct CWRay {
   __m256 tmin;
   __m128i bias;  // 127 (the exponent bias), kept opaque so that it is not rebuilt at every node
   const uint32_t* rows;
+  const uint32_t* full_rows;  // kPlaneRows<8> of the ray's octant (the full nodes' plane rows)
   const uint64_t* order;  // kCWOctantOrder of the ray's octant
   bool exp_add;
 
-  CWRay(const RayCtx& ray, float t0, const float coord_bound[3], int e_min, int e_max) {
-    // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
-    // E = 8 u (K + |o|) R + 2^-110 (1 + R).
-    const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
+  CWRay(const RayCtx& ray, float t0, const float coord_bound[3], int e_min, int e_max)
+      : CWRay(cw_fused_planes(ray, coord_bound), ray.octant(), t0, e_min, e_max) {}
+  // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
+  // E = 8 u (K + |o|) R + 2^-110 (1 + R). They also serve the full nodes of an uncompressed top
+  // (structures/cwbvh.h) through the MBVH node test (box_test, cw_full_ray): that test needs
+  // E >= 1.005 u (2 K + 3 |o|) R with K >= |P| for its float planes P, which CWBVH::coord_bound
+  // covers, and 8 u (K + |o|) exceeds it. (Their own, ~4x smaller E changed nothing: crytek,
+  // sponza and conference test the same leaves per ray within 1%, session 23.)
+  static FusedPlanes<4> cw_fused_planes(const RayCtx& ray, const float coord_bound[3]) {
+    return fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
+  }
+  CWRay(const FusedPlanes<4>& p, uint32_t octant, float t0, int e_min, int e_max) {
     r44 = _mm256_set_m128(p.r, p.r);
     cn44 = _mm256_set_m128(p.cn, p.cn);
     cf44 = _mm256_set_m128(p.cf, p.cf);
@@ -113,8 +123,8 @@ struct CWRay {
     tmin = _mm256_set1_ps(t0);
     bias = _mm_set1_epi32(127);
     __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
-    const uint32_t octant = ray.octant();
     rows = kCWPlaneRows[octant].data();
+    full_rows = kPlaneRows<8>[octant].data();
     order = kCWOctantOrder[octant].data();
   }
 };
@@ -174,6 +184,22 @@ template <bool ExpAdd = false>
   }
   tn = n;
   return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
+}
+
+// The MBVH node test's per-ray constants (NodeRay<8>, for box_test on the full nodes of an
+// uncompressed top): each axis' r, c_near and c_far an in-lane permute of CWRay's [x | x]
+// constants, which the compressed test keeps in registers. Formed where a full node is tested
+// rather than kept per ray as a NodeRay (nine vectors more than the 16 AVX2 registers hold beside
+// the compressed test's: built per ray and spilled, they cost ~60 more instructions per ray on
+// crytek primary rays, session 23).
+[[gnu::always_inline]] inline NodeRay<8> cw_full_ray(const CWRay& r) {
+  NodeRay<8> f;
+  f.rx = _mm256_permute_ps(r.r44, 0x00), f.ry = _mm256_permute_ps(r.r44, 0x55), f.rz = _mm256_permute_ps(r.r44, 0xAA);
+  f.cnx = _mm256_permute_ps(r.cn44, 0x00), f.cny = _mm256_permute_ps(r.cn44, 0x55), f.cnz = _mm256_permute_ps(r.cn44, 0xAA);
+  f.cfx = _mm256_permute_ps(r.cf44, 0x00), f.cfy = _mm256_permute_ps(r.cf44, 0x55), f.cfz = _mm256_permute_ps(r.cf44, 0xAA);
+  f.tmin = r.tmin;
+  f.rows = r.full_rows;
+  return f;
 }
 
 // The 8 child references of a node: child_base + meta for interior slots, leaf_base + meta (the

@@ -102,6 +102,7 @@ struct NodeRay {
   f rx, ry, rz, cnx, cny, cnz, cfx, cfy, cfz, tmin;  // FusedPlanes' r, c_near, c_far per axis
   const uint32_t* rows;  // kPlaneRows<N> of the ray's octant
   uint32_t octant;       // bit a set: direction a negative
+  NodeRay() = default;  // fields set by the caller (cwbvh_traverse.h's cw_full_ray)
   NodeRay(const RayCtx& rc, float t0, const float bound[3])
       : NodeRay(fused_planes(rc.org, rc.inv, bound), t0, rc.octant()) {}
   NodeRay(const FusedPlanes<4>& p, float t0, uint32_t oct) {
