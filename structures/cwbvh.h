@@ -3,7 +3,8 @@
 // boxes of a node are stored as 8-bit offsets in the node's local grid — an fp32 origin p and a
 // power-of-two cell size 2^e per axis — instead of 6 floats each. 80 bytes per node where the
 // MBVH8 layout (structures/mbvh.h) takes 256: 10 bytes per child, the lecture's "amortized 10
-// bytes per child, 3.2x compression".
+// bytes per child, 3.2x compression". Optionally a small top of the tree stays uncompressed
+// ("Uncompressed top" below; cwbvh_single keeps 4% of its nodes so by default).
 //
 // Layout (Ylitie et al.'s, adapted to the CPU leaf blocks): interior children of a node are stored
 // consecutively from `child_base` (slot i's node is child_base + meta[i]), the triangle blocks of
@@ -39,7 +40,7 @@
 // compressed child its index in `nodes`, a leaf the compressed leaf reference (any block, no
 // 16-block limit), an unused slot an empty box (lo = +inf, hi = -inf) with a one-triangle leaf
 // reference. Children of compressed nodes are compressed. With 4% of the nodes full, node bytes
-// are 0.3125 + 0.04 * 0.6875 = 0.340 of the MBVH8's, and 73-85% of node visits take the
+// are 0.3125 + 0.04 * 0.6875 = 0.340 of the MBVH8's, and 69-83% of node visits take the
 // uncompressed test on crytek_sponza_partial, sponza and spheres:2M (primary and bounce:2;
 // docs/PERFORMANCE.md, session 23).
 //

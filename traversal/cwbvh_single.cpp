@@ -26,7 +26,14 @@
 // changes the work, never the hits' distances.
 // Leaves are the MBVH8's 8-wide triangle blocks under the watertight SIMD test.
 // The tree is the SAH-collapsed MBVH8 (same parameters as mbvh8_single, leaves of at most 16
-// triangles), re-laid out and quantized.
+// triangles), re-laid out and quantized; `full_top` percent of its nodes, those of largest box
+// area, stay MBVH8 nodes (structures/cwbvh.h, "Uncompressed top"; Benthin et al. 2018's
+// compressed-leaf BVH keeps full-precision nodes where the visits are). Default 4: 0.340x the
+// MBVH8's node bytes (the bound is 0.35x), and 69-83% of the node visits on crytek,
+// sponza and spheres:2M take the MBVH8's one-fma-per-plane test instead of widening and converting
+// 8-bit rows: cwbvh_single / mbvh8_single on primary rays crytek 0.83 -> 0.92-0.95, spheres:2M
+// 0.85-0.88 -> 0.96-1.00, bunny 0.85 -> 0.91-0.92 (interleaved, 3 rounds; docs/PERFORMANCE.md,
+// session 23). full_top=0 is the plain compressed layout.
 #include <cstddef>
 #include <cstring>
 
