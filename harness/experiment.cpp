@@ -43,14 +43,17 @@ const std::vector<Hit>& Bench::reference_hits(const WorkloadSpec& spec, int thre
   return it->second;
 }
 
-Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt) {
+Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt,
+                    const std::string& entry) {
+  const std::string label = entry.empty() ? std::string(scheme.name()) : entry;
   if (opt.cells) {  // a table's cells: `table --resume` takes those its CSV kept (harness/sweep.h)
     opt.cells->check_scene(bench.scene());
-    if (const Record* kept = opt.cells->replay(bench.scene().name, spec.name(), std::string(scheme.name()))) return *kept;
+    if (const Record* kept = opt.cells->replay(bench.scene().name, spec.name(), label)) return *kept;
   }
   std::vector<Hit> hits;
   Record r = measure_rays(bench, spec.name(), bench.rays(spec), bench.reference_hits(spec, std::max(2, opt.threads)),
                           scheme, opt, hits);
+  if (!entry.empty()) r.set("scheme", entry).set("params", params_text(entry, opt.scheme_config));
   if (opt.cells) opt.cells->append(r);
   return r;
 }

@@ -58,7 +58,10 @@ class Bench {
 std::string spec_key(const WorkloadSpec& s);
 
 // Measures one (workload, scheme) cell: throughput, accuracy, and counters/cache on request.
-Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt);
+// `entry` (a table's scheme entry as given, e.g. cwbvh_single:full_top=0) labels the row: its
+// scheme and params columns, and the row `table --resume` expects; empty: the scheme's name.
+Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt,
+                    const std::string& entry = {});
 // The same for rays from elsewhere (`travbench trace` of a ray file): `ref` are the reference's
 // hits on `batch`, `workload` labels the row, `hits` receives the scheme's hits.
 Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& batch,

@@ -36,9 +36,11 @@ int bandwidth_table(const TableOptions& opt) {
     schemes.back()->prepare(bench.scene(), bench.cache());
   }
   std::vector<Record> records;  // scheme-major: records[s * workloads + w]
-  for (auto& t : schemes) {
+  for (size_t k = 0; k < schemes.size(); ++k) {
+    Traverser* t = schemes[k].get();
     for (const std::string& w : workloads) {
-      Record r = measure_cell(bench, table_spec(opt, w, run.view), *t, run);
+      // Labelled with the entry: cwbvh_single and cwbvh_single:full_top=0 are two rows.
+      Record r = measure_cell(bench, table_spec(opt, w, run.view), *t, run, names[k]);
       // Columns a scheme gathers only under the cache (treelet_queue's memory-read split): the
       // --stats columns were taken before measure_cell's --cache trace.
       for (const StatColumn& s : t->take_stat_columns())

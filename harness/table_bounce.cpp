@@ -58,7 +58,7 @@ int bounce_table(const TableOptions& opt) {
     auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());
     for (size_t depth = 0; depth < workloads.size(); ++depth) {
-      Record r = measure_cell(bench, table_spec(opt, workloads[depth]), *t, run);
+      Record r = measure_cell(bench, table_spec(opt, workloads[depth]), *t, run, name);
       r.set("layout", layout);
       const std::string dcol = "depth" + std::to_string(depth);
       r.set("depth", uint64_t(depth));

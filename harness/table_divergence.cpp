@@ -75,7 +75,7 @@ int divergence_table(const TableOptions& table_opt) {
       if (spec.kind == "divergence") spec.tile = uint32_t(tile);
       if (thesis_camera) spec.hfov_deg = thesis_hfov_deg();
       for (size_t s = 0; s < schemes.size(); ++s) {
-        Record r = measure_cell(bench, spec, *schemes[s], run);
+        Record r = measure_cell(bench, spec, *schemes[s], run, scheme_names[s]);
         const double mrays = std::stod(*r.get("mrays_median"));
         const std::string& scheme = scheme_names[s];
         const std::string level = spec.kind == "divergence" ? std::to_string(spec.param) : spec.kind;

@@ -20,7 +20,7 @@ int scaling_table(const TableOptions& opt) {
     for (const auto& name : default_schemes(opt)) {
       auto t = make_scheme(name, config_for(name, opt.run.scheme_config));
       t->prepare(bench.scene(), bench.cache());
-      Record r = measure_cell(bench, spec, *t, opt.run);
+      Record r = measure_cell(bench, spec, *t, opt.run, name);
       r.set("structure_mb", double(t->structure_bytes()) / (1024.0 * 1024.0));
       std::fprintf(stderr, "%-18s %-16s %8s Mrays/s\n", bench.scene().name.c_str(), name.c_str(),
                    r.get("mrays_median")->c_str());

@@ -26,13 +26,14 @@ TEST(TableBandwidth, RoundsInterleaveAndRatiosPairTheSameRound) {
   TableOptions opt;
   opt.scene = "room";  // bounce:2 rays exist (the sphere scene has none)
   opt.csv = (dir / "b.csv").string();
-  opt.run.schemes = {"mbvh8_single", "cwbvh_single", "treelet_queue"};
+  // An entry with a parameter of its own is a row of its own, labelled as given.
+  opt.run.schemes = {"mbvh8_single", "cwbvh_single", "treelet_queue", "cwbvh_single:full_top=0"};
   opt.run.width = opt.run.height = 32;
   opt.run.reps = 3;
   opt.run.progress = false;
   ASSERT_EQ(run_table("bandwidth", opt), 0);
   const CsvTable t = read_csv(opt.csv);
-  ASSERT_EQ(t.rows.size(), 6u);  // 3 schemes x primary, bounce:2
+  ASSERT_EQ(t.rows.size(), 8u);  // 4 schemes x primary, bounce:2
   const int scheme = t.column("scheme"), workload = t.column("workload"), samples = t.column("mrays_samples");
   const int base = t.column("speed_base"), median = t.column("speed_ratio_median"), reps = t.column("reps");
   const int lo = t.column("speed_ratio_min"), hi = t.column("speed_ratio_max"), reads = t.column("mem_reads_per_ray");
@@ -57,6 +58,22 @@ TEST(TableBandwidth, RoundsInterleaveAndRatiosPairTheSameRound) {
     }
     EXPECT_GT(std::stod(t.at(i, reads)), 0.0);
   }
+  // The entry's rows: its own parameter in the params column, the plain compressed layout's 80
+  // bytes per node fetch (the default's uncompressed top reads more per fetch).
+  const int params = t.column("params"), bytes = t.column("bytes_per_node");
+  ASSERT_GE(params, 0);
+  ASSERT_GE(bytes, 0);
+  int plain = 0;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    if (t.at(i, scheme) == "cwbvh_single:full_top=0") {
+      ++plain;
+      EXPECT_NE(t.at(i, params).find("full_top=0"), std::string::npos) << t.at(i, params);
+      EXPECT_EQ(t.at(i, bytes), "80");
+    } else if (t.at(i, scheme) == "cwbvh_single") {
+      EXPECT_EQ(t.at(i, params).find("full_top"), std::string::npos) << t.at(i, params);
+    }
+  }
+  EXPECT_EQ(plain, 2);
   std::filesystem::remove_all(dir);
 }
 
