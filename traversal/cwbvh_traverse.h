@@ -98,18 +98,14 @@ struct CWRay {
   const uint64_t* order;  // kCWOctantOrder of the ray's octant
   bool exp_add;
 
-  CWRay(const RayCtx& ray, float t0, const float coord_bound[3], int e_min, int e_max)
-      : CWRay(cw_fused_planes(ray, coord_bound), ray.octant(), t0, e_min, e_max) {}
-  // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
-  // E = 8 u (K + |o|) R + 2^-110 (1 + R). They also serve the full nodes of an uncompressed top
-  // (structures/cwbvh.h) through the MBVH node test (box_test, cw_full_ray): that test needs
-  // E >= 1.005 u (2 K + 3 |o|) R with K >= |P| for its float planes P, which CWBVH::coord_bound
-  // covers, and 8 u (K + |o|) exceeds it. (Their own, ~4x smaller E changed nothing: crytek,
-  // sponza and conference test the same leaves per ray within 1%, session 23.)
-  static FusedPlanes<4> cw_fused_planes(const RayCtx& ray, const float coord_bound[3]) {
-    return fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
-  }
-  CWRay(const FusedPlanes<4>& p, uint32_t octant, float t0, int e_min, int e_max) {
+  CWRay(const RayCtx& ray, float t0, const float coord_bound[3], int e_min, int e_max) {
+    // The kernel library's fused-plane constants (kernels.h) with the larger bound derived above:
+    // E = 8 u (K + |o|) R + 2^-110 (1 + R). They also serve the full nodes of an uncompressed top
+    // (structures/cwbvh.h) through the MBVH node test (box_test, cw_full_ray): that test needs
+    // E >= 1.005 u (2 K + 3 |o|) R with K >= |P| for its float planes P, which CWBVH::coord_bound
+    // covers, and 8 u (K + |o|) exceeds it. (Their own, ~4x smaller E changed nothing: crytek,
+    // sponza and conference test the same leaves per ray within 1%, session 23.)
+    const FusedPlanes<4> p = fused_planes(ray.org, ray.inv, coord_bound, 8 * kUlp, 8 * kUlp);
     r44 = _mm256_set_m128(p.r, p.r);
     cn44 = _mm256_set_m128(p.cn, p.cn);
     cf44 = _mm256_set_m128(p.cf, p.cf);
@@ -123,6 +119,7 @@ struct CWRay {
     tmin = _mm256_set1_ps(t0);
     bias = _mm_set1_epi32(127);
     __asm__("" : "+x"(bias));  // opaque: a memory operand, not rebuilt per node
+    const uint32_t octant = ray.octant();
     rows = kCWPlaneRows[octant].data();
     full_rows = kPlaneRows<8>[octant].data();
     order = kCWOctantOrder[octant].data();
