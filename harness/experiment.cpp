@@ -43,6 +43,14 @@ const std::vector<Hit>& Bench::reference_hits(const WorkloadSpec& spec, int thre
   return it->second;
 }
 
+namespace {
+// A row names the scheme entry as given (embree_single:robust=0 and embree_single are two rows)
+// and the parameters it ran with, its own included.
+void name_entry(Record& r, const std::string& entry, const SchemeConfig& cfg) {
+  r.set("scheme", entry).set("params", params_text(entry, cfg));
+}
+}  // namespace
+
 Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, const RunOptions& opt,
                     const std::string& entry) {
   const std::string label = entry.empty() ? std::string(scheme.name()) : entry;
@@ -53,7 +61,7 @@ Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, c
   std::vector<Hit> hits;
   Record r = measure_rays(bench, spec.name(), bench.rays(spec), bench.reference_hits(spec, std::max(2, opt.threads)),
                           scheme, opt, hits);
-  if (!entry.empty()) r.set("scheme", entry).set("params", params_text(entry, opt.scheme_config));
+  if (!entry.empty()) name_entry(r, entry, opt.scheme_config);
   if (opt.cells) opt.cells->append(r);
   return r;
 }
@@ -155,10 +163,10 @@ std::string samples_text(const std::vector<double>& mrays) {
 }
 
 namespace {
-// A run's row names the scheme entry as given (embree_single:robust=0 and embree_single are two
-// rows) and the parameters it ran with, its own included.
+// A run's row: the entry's name and parameters (name_entry) and its structure's build time.
 void label_entry(Record& r, const std::string& entry, const RunOptions& opt, double prepare_ms) {
-  r.set("scheme", entry).set("params", params_text(entry, opt.scheme_config)).set("prepare_ms", prepare_ms);
+  name_entry(r, entry, opt.scheme_config);
+  r.set("prepare_ms", prepare_ms);
 }
 }  // namespace
 
