@@ -201,6 +201,26 @@ void Hierarchy::access(uint64_t addr, uint32_t size, bool write) {
   }
 }
 
+bool LineSet::insert(uint64_t line) {
+  const uint64_t key = line >> kRegionShift;
+  if (key != last_key_) {
+    std::unique_ptr<Region>& r = regions_[key];
+    if (!r) r = std::make_unique<Region>(Region{});
+    last_key_ = key, last_ = r.get();
+  }
+  const uint32_t bit = uint32_t(line) & ((1u << kRegionShift) - 1);
+  uint64_t& word = (*last_)[bit >> 6];
+  const uint64_t m = uint64_t(1) << (bit & 63);
+  if (word & m) return false;
+  word |= m;
+  return true;
+}
+
+void LineSet::clear() {
+  regions_.clear();
+  last_key_ = ~uint64_t(0), last_ = nullptr;
+}
+
 void Hierarchy::access_line(uint64_t line, bool write) {
   const size_t n = levels_.size();
   size_t npending = 0;
@@ -211,7 +231,11 @@ void Hierarchy::access_line(uint64_t line, bool write) {
     if (r.dirty_victim) pending_[npending++] = {i + 1, r.victim_line};
     if (r.hit) break;
   }
-  if (i == n) ++(write ? mem_writes_ : mem_reads_);
+  if (i == n) {
+    ++(write ? mem_writes_ : mem_reads_);
+    // A line never touched before misses every level, so only these accesses need the set.
+    if (seen_.insert(line) && !write) ++cold_reads_;
+  }
   while (npending > 0) {
     --npending;
     write_back(pending_[npending].level, pending_[npending].line);
@@ -229,7 +253,8 @@ void Hierarchy::write_back(size_t level, uint64_t line) {
 
 void Hierarchy::reset() {
   for (CacheLevel& l : levels_) l.reset();
-  mem_reads_ = mem_writes_ = 0;
+  mem_reads_ = mem_writes_ = cold_reads_ = 0;
+  seen_.clear();
 }
 
 uint64_t Hierarchy::cost_cycles() const {
@@ -254,7 +279,8 @@ void write_report(const Hierarchy& h, std::ostream& out) {
         << " write_misses=" << c.write_misses << " evictions=" << c.evictions
         << " writebacks=" << c.writebacks << '\n';
   }
-  out << "MEM reads=" << h.memory_reads() << " writes=" << h.memory_writes() << '\n';
+  out << "MEM reads=" << h.memory_reads() << " writes=" << h.memory_writes() << " cold_reads=" << h.cold_reads()
+      << '\n';
   out << "cost_cycles=" << h.cost_cycles() << '\n';
 }
 

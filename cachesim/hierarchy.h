@@ -17,11 +17,21 @@
 //     served, deepest level first.
 //   - An access of `size` bytes touches every line it overlaps, each counted as one access;
 //     size 0 touches nothing.
+//   - Cold reads (the compulsory misses of Hill and Smith's three-C model, 1989): lines whose
+//     first access since construction or reset() is a load. Every such load misses every level, so
+//     memory reads >= cold reads, with equality for a cache large enough to keep every line. They
+//     depend only on which lines are touched and whether each is first read or written, not on the
+//     order of the other accesses: a scheme that touches the same scene lines as another, in any
+//     order (treelet_queue against mbvh8_single: the same node and leaf visits, re-ordered), reads
+//     at least those lines' cold reads from memory, under any cache geometry or policy.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <iosfwd>
+#include <memory>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <vector>
 
 #include "cachesim/cache_level.h"
@@ -57,6 +67,23 @@ HierarchyConfig parse_config(std::string_view spec);
 // the line size of L1, and there is at least one level.
 void validate_config(const HierarchyConfig& cfg);
 
+// The set of line addresses seen so far (for cold reads): one bitmap of 4096 lines (256 KiB of
+// address space at 64-byte lines) per region touched, found through a hash map, with the last
+// region remembered, so that the common access (the same region as the previous one) costs a
+// compare and a bit test and nothing is allocated but once per new region.
+class LineSet {
+ public:
+  bool insert(uint64_t line);  // true: the line was not in the set
+  void clear();
+
+ private:
+  static constexpr uint32_t kRegionShift = 12;
+  using Region = std::array<uint64_t, (1u << kRegionShift) / 64>;
+  std::unordered_map<uint64_t, std::unique_ptr<Region>> regions_;
+  uint64_t last_key_ = ~uint64_t(0);
+  Region* last_ = nullptr;
+};
+
 class Hierarchy {
  public:
   Hierarchy();  // default_config()
@@ -76,6 +103,9 @@ class Hierarchy {
 
   uint64_t memory_reads() const { return mem_reads_; }
   uint64_t memory_writes() const { return mem_writes_; }
+  // Lines first touched by a load (see the model above): a lower bound of memory_reads() for any
+  // hierarchy fed the same lines, each first read or written as here.
+  uint64_t cold_reads() const { return cold_reads_; }
 
   // Table 11's estimate as the brief defines it: sum over levels of hits (reads and writes,
   // write-backs included) x latency, plus memory reads and writes x memory latency.
@@ -96,7 +126,8 @@ class Hierarchy {
   HierarchyConfig cfg_;
   std::vector<CacheLevel> levels_;
   uint32_t line_shift_ = 6;
-  uint64_t mem_reads_ = 0, mem_writes_ = 0;
+  uint64_t mem_reads_ = 0, mem_writes_ = 0, cold_reads_ = 0;
+  LineSet seen_;
   std::vector<PendingWriteback> pending_;  // scratch for access_line, one slot per level
 };
 

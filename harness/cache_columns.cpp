@@ -28,6 +28,7 @@ void add_cache_columns(Record& r, const Traverser& scheme, const RayBatch& batch
   }
   r.set("mem_read_m", double(h.memory_reads()) * 1e-6)
       .set("mem_write_m", double(h.memory_writes()) * 1e-6)
+      .set("mem_read_cold_m", double(h.cold_reads()) * 1e-6)
       .set("cost_mcycles", double(h.cost_cycles()) * 1e-6)
       .set("read_cost_mcycles", double(h.read_cost_cycles()) * 1e-6);
   const double total = double(h.read_cost_cycles());

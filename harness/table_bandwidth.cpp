@@ -48,6 +48,7 @@ int bandwidth_table(const TableOptions& opt) {
       // Memory reads are whole lines of the simulated hierarchy (64 bytes).
       const double rays = std::max(1.0, std::stod(*r.get("rays")));
       r.set("mem_reads_per_ray", std::stod(*r.get("mem_read_m")) * 1e6 / rays);
+      r.set("cold_reads_per_ray", std::stod(*r.get("mem_read_cold_m")) * 1e6 / rays);
       records.push_back(std::move(r));
     }
   }
@@ -70,7 +71,7 @@ int bandwidth_table(const TableOptions& opt) {
             {{"command", "table bandwidth"}, {"scene", bench.scene().name}, {"cache", run.cache_config},
              {"policy", run.cache_policy}, {"rounds", rounds}});
   print_table(records, {"scheme", "workload", "bytes_per_node", "node_bytes", "prim_bytes", "mem_reads_per_ray",
-                        "mem_read_m", "mrays_median", "speed_ratio_median", "speed_ratio_min", "speed_ratio_max",
+                        "cold_reads_per_ray", "mem_read_m", "mrays_median", "speed_ratio_median", "speed_ratio_min", "speed_ratio_max",
                         "mismatch_rate", "false_miss"},
               stdout);
   return 0;

@@ -71,7 +71,7 @@ TEST(CacheSim, DineroTraceLru) {
   EXPECT_EQ(h.memory_reads(), 11u);
   EXPECT_EQ(cs::format_report(h),
             "L1 reads=13 writes=0 hits=2 misses=11 read_misses=11 write_misses=0 evictions=3 writebacks=0\n"
-            "MEM reads=11 writes=0\n"
+            "MEM reads=11 writes=0 cold_reads=9\n"
             "cost_cycles=1185\n");  // 2 hits x 4 + 11 memory reads x 107
 }
 
@@ -400,7 +400,7 @@ TEST(CacheSim, RunCachesimCommand) {
             "L1 reads=13 writes=0 hits=3 misses=10 read_misses=10 write_misses=0 evictions=2 writebacks=0\n"
             "L2 reads=10 writes=0 hits=1 misses=9 read_misses=9 write_misses=0 evictions=0 writebacks=0\n"
             "L3 reads=9 writes=0 hits=0 misses=9 read_misses=9 write_misses=0 evictions=0 writebacks=0\n"
-            "MEM reads=9 writes=0\n"
+            "MEM reads=9 writes=0 cold_reads=9\n"
             "cost_cycles=986\n");  // 3 x 4 + 1 x 11 + 9 x 107
 
   std::ostringstream sink;
@@ -415,6 +415,57 @@ TEST(CacheSim, RunCachesimCommand) {
                 .find("'mru'"),
             std::string::npos);
   std::filesystem::remove_all(dir);
+}
+
+// Cold reads (hierarchy.h: lines first touched by a load): a line first written is not one, a
+// re-read after eviction is a memory read but not a cold read, lines in different 256 KiB regions
+// of the line set (and far apart) are told apart, reset() forgets them.
+TEST(CacheSim, ColdReadsCountFirstTouchLoads) {
+  cs::Hierarchy h = single_level(1 << 10, 2, cs::Policy::LRU);  // 8 sets of 2 ways
+  h.access(0x0, 8, false);        // cold
+  h.access(0x8, 8, false);        // same line: hit
+  h.access(0x40, 4, true);        // first touch is a store: a memory write, not a cold read
+  h.access(0x40, 4, false);       // hit
+  h.access(0x3FFC0, 128, false);  // lines 4095 and 4096: the last of one region, the first of the next
+  h.access(uint64_t(1) << 40, 4, false);
+  EXPECT_EQ(h.cold_reads(), 4u);
+  EXPECT_EQ(h.memory_reads(), 4u);
+  // Set 0 holds two lines: three more in it evict line 0, whose re-read is a miss but not cold.
+  for (uint64_t a : {0x200, 0x400, 0x600}) h.access(a, 4, false);
+  h.access(0x0, 4, false);
+  EXPECT_EQ(h.cold_reads(), 7u);
+  EXPECT_EQ(h.memory_reads(), 8u);
+  h.reset();
+  EXPECT_EQ(h.cold_reads(), 0u);
+  h.access(0x0, 4, false);
+  EXPECT_EQ(h.cold_reads(), 1u);
+}
+
+// The bound: memory reads >= cold reads for any geometry and policy, and equal where no line is
+// ever evicted: under LRU a working set that fits each set's ways (tree-PLRU may evict a line of
+// such a set, EightLinesFitLruButNotTreePlru). Random loads and stores.
+TEST(CacheSim, ColdReadsBoundMemoryReads) {
+  for (cs::Policy policy : {cs::Policy::LRU, cs::Policy::TreePLRU, cs::Policy::BitPLRU}) {
+    SCOPED_TRACE(std::string(cs::policy_name(policy)));
+    cs::Hierarchy small = from_spec("l1=4K:4,l2=16K:8", policy);
+    cs::Hierarchy big = single_level(64 << 10, 8, policy);
+    uint64_t x = 2463534242ull;
+    for (int i = 0; i < 200000; ++i) {
+      x ^= x << 13, x ^= x >> 7, x ^= x << 17;
+      const uint64_t addr = x & ((64u << 10) - 16);  // 16-aligned, fits `big` exactly: 128 sets x 8 ways
+      const bool write = (x >> 20) % 5 == 0;
+      small.access(addr, 16, write);
+      big.access(addr, 16, write);
+    }
+    EXPECT_GT(small.memory_reads(), small.cold_reads());
+    EXPECT_EQ(small.cold_reads(), big.cold_reads());  // the same lines, first touched alike
+    EXPECT_GE(big.memory_reads(), big.cold_reads());
+    if (policy == cs::Policy::LRU) {
+      EXPECT_EQ(big.counters(0).evictions, 0u);
+      EXPECT_EQ(big.memory_reads(), big.cold_reads());
+    }
+    EXPECT_GT(big.cold_reads(), 0u);
+  }
 }
 
 // Not a timing assertion (machines differ): checks that long runs stay consistent and reports the

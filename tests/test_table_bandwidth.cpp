@@ -37,7 +37,8 @@ TEST(TableBandwidth, RoundsInterleaveAndRatiosPairTheSameRound) {
   const int scheme = t.column("scheme"), workload = t.column("workload"), samples = t.column("mrays_samples");
   const int base = t.column("speed_base"), median = t.column("speed_ratio_median"), reps = t.column("reps");
   const int lo = t.column("speed_ratio_min"), hi = t.column("speed_ratio_max"), reads = t.column("mem_reads_per_ray");
-  for (int c : {scheme, workload, samples, base, median, reps, lo, hi, reads}) ASSERT_GE(c, 0);
+  const int cold = t.column("cold_reads_per_ray");
+  for (int c : {scheme, workload, samples, base, median, reps, lo, hi, reads, cold}) ASSERT_GE(c, 0);
   for (size_t i = 0; i < t.rows.size(); ++i) {
     EXPECT_EQ(t.at(i, base), "mbvh8_single");
     EXPECT_EQ(t.at(i, reps), "3");
@@ -57,6 +58,9 @@ TEST(TableBandwidth, RoundsInterleaveAndRatiosPairTheSameRound) {
       EXPECT_EQ(t.at(i, median), "1");
     }
     EXPECT_GT(std::stod(t.at(i, reads)), 0.0);
+    // Cold reads (lines first touched by a load, cachesim/hierarchy.h) bound the memory reads.
+    EXPECT_GT(std::stod(t.at(i, cold)), 0.0);
+    EXPECT_LE(std::stod(t.at(i, cold)), std::stod(t.at(i, reads)) * (1 + 1e-5));
   }
   // The entry's rows: its own parameter in the params column, the plain compressed layout's 80
   // bytes per node fetch (the default's uncompressed top reads more per fetch).
