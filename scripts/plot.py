@@ -62,8 +62,11 @@ def ordered(names):
     return sorted(set(names), key=lambda s: (SCHEME_ORDER.index(s) if s in SCHEME_ORDER else 99, s))
 
 
-def grouped_bars(ax, rows, group_key, groups, schemes, value_key, thesis_key=None):
+def grouped_bars(ax, rows, group_key, groups, schemes, value_key, thesis_key=None, floor_key=None, floor_label=None):
+    """Bars per group and scheme; thesis_key: hollow circles at the thesis' values; floor_key: a black
+    tick at a lower bound of each bar (labelled once as floor_label)."""
     width = 0.8 / max(1, len(schemes))
+    floors = []
     for j, s in enumerate(schemes):
         xs, ys, ts = [], [], []
         for i, g in enumerate(groups):
@@ -73,12 +76,17 @@ def grouped_bars(ax, rows, group_key, groups, schemes, value_key, thesis_key=Non
             xs.append(i + (j - (len(schemes) - 1) / 2) * width)
             ys.append(num(match[0], value_key))
             ts.append(num(match[0], thesis_key) if thesis_key else math.nan)
+            if floor_key and match[0].get(floor_key):
+                floors.append((xs[-1], num(match[0], floor_key)))
         layout = next((r.get("layout") for r in rows if r["scheme"] == s and r.get("layout")), "")
         ax.bar(xs, ys, width, label=f"{s} ({layout})" if layout else s, color=colour(s))
         pts = [(x, t) for x, t in zip(xs, ts) if not math.isnan(t)]
         if pts:
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], facecolors="none", edgecolors="black",
                        zorder=3, s=28, label=None)
+    if floors:
+        ax.scatter([p[0] for p in floors], [p[1] for p in floors], marker="_", s=width * 900, color="black",
+                   linewidths=2, zorder=4, label=floor_label)
     ax.set_xticks(range(len(groups)))
     ax.set_xticklabels(groups, rotation=20)
 
@@ -310,9 +318,13 @@ def plot_bandwidth(path):
     panels = [("bytes_per_node", "bytes per node fetch"), ("mem_reads_per_ray", "simulated memory reads per ray (64 B lines)"),
               ("mrays_median", "Mrays/s (1 thread, median)")]
     for ax, (key, label) in zip(axes, panels):
-        grouped_bars(ax, rows, "workload", workloads, schemes, key)
+        # The memory reads' compulsory part (cold reads, cachesim/hierarchy.h) as a tick on each bar.
+        floor = ("cold_reads_per_ray", "cold reads (compulsory)") if key == "mem_reads_per_ray" else (None, None)
+        grouped_bars(ax, rows, "workload", workloads, schemes, key, floor_key=floor[0], floor_label=floor[1])
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)
+        if floor[0] and any(r.get(floor[0]) for r in rows):
+            ax.legend(handles=[h for h in ax.get_legend_handles_labels()[0] if h.get_label() == floor[1]], fontsize=8)
     scene = rows[0]["scene"] if rows else ""
     finish(fig, axes[0], path.with_suffix(".png"), f"{scene}: node bytes, memory reads, speed", "bytes per node fetch")
 
