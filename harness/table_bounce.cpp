@@ -51,25 +51,30 @@ int bounce_table(const TableOptions& opt) {
   run.stats = true;  // Table 8 needs the instrumented pass
   std::vector<Record> records;
   for (const auto& name : names) {
+    // The entry as given labels the rows; the scheme it names picks the thesis' layout and rows
+    // (an entry's own parameters override the layout's: thesis_layout fills only absent keys).
     const SchemeInfo& info = find_scheme(name);
+    const std::string& scheme = info.name;
     SchemeConfig cfg = config_for(name, opt.run.scheme_config);
     if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
-    const std::string layout = thesis_layout(name, cfg);
+    const std::string layout = thesis_layout(scheme, cfg);
     auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());
+    RunOptions cell = run;
+    cell.scheme_config.params = cfg.params;  // the params column: what the scheme ran with, the layout's included
     for (size_t depth = 0; depth < workloads.size(); ++depth) {
-      Record r = measure_cell(bench, table_spec(opt, workloads[depth]), *t, run, name);
+      Record r = measure_cell(bench, table_spec(opt, workloads[depth]), *t, cell, name);
       r.set("layout", layout);
       const std::string dcol = "depth" + std::to_string(depth);
       r.set("depth", uint64_t(depth));
       if (info.baseline) r.set("rays_per_node", "").set("rays_per_leaf", "");  // Embree cannot be instrumented
-      r.set("thesis_scene", tscene).set("thesis_scheme", thesis_scheme7(name));
+      r.set("thesis_scene", tscene).set("thesis_scheme", thesis_scheme7(scheme));
       std::optional<double> v7;
-      if (!tscene.empty() && !thesis_scheme7(name).empty())
-        v7 = t7.lookup({"scene", "scheme"}, {tscene, thesis_scheme7(name)}, dcol);
+      if (!tscene.empty() && !thesis_scheme7(scheme).empty())
+        v7 = t7.lookup({"scene", "scheme"}, {tscene, thesis_scheme7(scheme)}, dcol);
       if (v7) r.set("thesis_mrays", *v7);
       else r.set("thesis_mrays", "");
-      thesis_rays.set_columns(r, "8", thesis_scheme8(name), dcol);
+      thesis_rays.set_columns(r, "8", thesis_scheme8(scheme), dcol);
       if (opt.run.progress)
         std::fprintf(stderr, "%-16s %-10s %9s Mrays/s (thesis %s)  rays/node %s  mismatch %s\n", name.c_str(),
                      workloads[depth].c_str(), r.get("mrays_median")->c_str(), r.get("thesis_mrays")->c_str(),

@@ -81,25 +81,31 @@ int raygrid_table(const TableOptions& opt) {
   // Table 9, and this table, at the first bounce.)
   std::vector<Record> records;
   for (const auto& name : names) {
+    // The entry as given labels the rows (raygrid and raygrid:queue=64 are rows of their own); the
+    // scheme it names picks the thesis' layout and rows.
     const SchemeInfo& info = find_scheme(name);
+    const std::string& scheme = info.name;
     SchemeConfig cfg = config_for(name, base);
     if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
-    const std::string layout = thesis_layout(name, cfg);
+    const std::string layout = thesis_layout(scheme, cfg);
     auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());
+    RunOptions cell = run;
+    cell.scheme_config.params = cfg.params;  // the params column: what the scheme ran with, the layout's included
     for (int k = 1; k <= 4; ++k) {
       raygrid_reset_stats(*t);
-      Record r = measure_cell(bench, table_spec(opt, "bounce:" + std::to_string(k)), *t, run);
+      Record r = measure_cell(bench, table_spec(opt, "bounce:" + std::to_string(k)), *t, cell, name);
       r.set("bounce", k).set("part", "table9").set("layout", layout);
       if (info.baseline) r.set("rays_per_node", "").set("rays_per_leaf", "");  // Embree cannot be instrumented
-      const std::string ts = thesis_scheme9(name);
+      const std::string ts = thesis_scheme9(scheme);
       r.set("thesis_scene", tscene).set("thesis_scheme", ts);
       const std::string col = "bounce" + std::to_string(k);
       auto v9 = tscene.empty() || ts.empty() ? std::nullopt : t9.lookup({"scene", "scheme"}, {tscene, ts}, col);
       if (v9) r.set("thesis_mrays", *v9);
       else r.set("thesis_mrays", "");
       // Table 10 (RayGrid) and Table 8 (MBVH/RS): depth k = k-th bounce; Modern Room only.
-      thesis_rays.set_columns(r, name == "raygrid" ? "10" : name == "mbvh_rs" ? "8" : "", name, "depth" + std::to_string(k));
+      thesis_rays.set_columns(r, scheme == "raygrid" ? "10" : scheme == "mbvh_rs" ? "8" : "", scheme,
+                              "depth" + std::to_string(k));
       raygrid_columns(r, *t);
       if (opt.run.progress)
         std::fprintf(stderr, "%-14s bounce:%d %9s Mrays/s (thesis %s)  rays/node %s  rays/leaf %s  mismatch %s\n",
@@ -144,7 +150,7 @@ int raygrid_table(const TableOptions& opt) {
         t->prepare(bench.scene(), bench.cache());
         RunOptions sr = run;
         sr.scheme_config = cfg;
-        Record r = measure_cell(bench, spec, *t, sr);
+        Record r = measure_cell(bench, spec, *t, sr, "raygrid");
         r.set("bounce", 3).set("part", "sweep").set("layout", layout);
         if (single > 0) r.set("pct_over_single", fmt(100.0 * (std::stod(*r.get("mrays_median")) / single - 1.0)));
         else r.set("pct_over_single", "");

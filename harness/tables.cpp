@@ -114,10 +114,13 @@ int accuracy_table(const TableOptions& opt) {
       for (const Variant& var : variants_of(info, opt.run.scheme_config)) {
         auto t = make_scheme(scheme, config_for(scheme, var.config));
         t->prepare(bench.scene(), bench.cache());
+        RunOptions cell = opt.run;
+        cell.scheme_config = var.config;  // the params column: the variant's (Embree's robust=0|1 included)
         for (const auto& w : workloads) {
           WorkloadSpec spec = parse_workload(w);
           spec.width = opt.run.width, spec.height = opt.run.height, spec.seed = opt.run.seed;
-          Record r = measure_cell(bench, spec, *t, opt.run);
+          // Labelled with the entry as given: a scheme with parameters of its own is a row of its own.
+          Record r = measure_cell(bench, spec, *t, cell, scheme);
           r.set("kernel", var.label).set("offset", scene_name == base ? "0" : scene_name.substr(base.size() + 1));
           r.set("must_hit", hard_case_must_hit(w) ? "yes" : "no");
           if (opt.run.progress)
