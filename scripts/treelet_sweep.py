@@ -11,7 +11,9 @@ rays_in_flight=F --param treelet_bytes=B` (the default --cache hierarchy l1=32K:
 l3=2M:16); one more run of mbvh8_single gives the ratio. Per (point, workload) the CSV keeps the
 memory reads per ray, their ratio to mbvh8_single's, where they go (treelet_mem_slots, _stacks:
 the suspended rays' state; _nodes, _tris: the scene; _other: ray batch, queues, treelet map) and the
-queue statistics. The question it answers: is there a pool size at which the waiting rays' state
+queue statistics, and mbvh8_single's cold reads (lines first touched by a load: the floor under
+any reordering of its visits, which treelet_queue makes on the same arrays; `floor_ratio` is that
+floor over mbvh8_single's reads, the least ratio any point can reach). The question it answers: is there a pool size at which the waiting rays' state
 stays cached while the queues are still long enough to amortise the treelets (the goal: <= 0.5x
 mbvh8_single on bounce:2 beyond L3)? Points already in --out are kept (an interrupted sweep resumes).
 A PNG beside --out plots bounce:2's reads per ray against the pool size, one line per budget.
@@ -23,11 +25,11 @@ import subprocess
 import sys
 import tempfile
 
-KEEP = ["mem_reads_per_ray", "treelet_mem_slots", "treelet_mem_stacks", "treelet_mem_nodes", "treelet_mem_tris",
+KEEP = ["mem_reads_per_ray", "cold_reads_per_ray", "treelet_mem_slots", "treelet_mem_stacks", "treelet_mem_nodes", "treelet_mem_tris",
         "treelet_mem_other", "treelet_switches_per_ray", "treelet_rays_per_visit", "treelet_queue_rays", "treelets",
         "rays", "mismatch_rate", "false_miss", "false_hit"]
 FIELDS = ["scene", "width", "height", "workload", "rays_in_flight", "treelet_bytes", "ratio_to_mbvh8_single",
-          "mbvh8_single_mem_reads_per_ray"] + KEEP + ["state_reads_per_ray", "other_reads_per_ray",
+          "mbvh8_single_mem_reads_per_ray", "mbvh8_single_cold_reads_per_ray", "floor_ratio"] + KEEP + ["state_reads_per_ray", "other_reads_per_ray",
                                                        "reads_if_state_48B_per_switch", "ratio_if_state_48B_per_switch",
                                                        "ratio_if_state_free"]
 # The smallest state a suspended ray can be resumed from: origin and direction (24 bytes), closest
@@ -89,6 +91,9 @@ def plot(rows, out_png, scene):
         ax.grid(alpha=0.3)
     axes[0].axhline(base, color="k", lw=1, label="mbvh8_single")
     axes[0].axhline(0.5 * base, color="k", lw=1, ls=":", label="goal: 0.5x mbvh8_single")
+    if b2[0].get("mbvh8_single_cold_reads_per_ray"):
+        axes[0].axhline(float(b2[0]["mbvh8_single_cold_reads_per_ray"]), color="tab:red", lw=1, ls="-.",
+                        label="floor: mbvh8_single's cold reads")
     axes[0].set_ylabel("simulated memory reads per ray")
     axes[0].set_title(f"treelet_queue, {scene} bounce:2")
     axes[0].legend(fontsize=6, ncol=2)
@@ -100,7 +105,7 @@ def plot(rows, out_png, scene):
 
 def write(path, rows):
     with open(path, "w", newline="") as f:
-        wr = csv.DictWriter(f, fieldnames=FIELDS)
+        wr = csv.DictWriter(f, fieldnames=FIELDS, restval="")
         wr.writeheader()
         wr.writerows(derive(r) for r in rows)
 
@@ -121,8 +126,11 @@ def main():
             rows = [r for r in csv.DictReader(f) if r["width"] == str(args.width) and r["height"] == str(args.height)]
     done = {(r["rays_in_flight"], r["treelet_bytes"]) for r in rows}
     base = {r["workload"]: r["mbvh8_single_mem_reads_per_ray"] for r in rows}
+    cold = {r["workload"]: r.get("mbvh8_single_cold_reads_per_ray", "") for r in rows}
     if not base:
-        base = {w: r["mem_reads_per_ray"] for w, r in bandwidth(args, "mbvh8_single", []).items()}
+        got = bandwidth(args, "mbvh8_single", [])
+        base = {w: r["mem_reads_per_ray"] for w, r in got.items()}
+        cold = {w: r.get("cold_reads_per_ray", "") for w, r in got.items()}
     scene = os.path.splitext(os.path.basename(args.scene))[0]
     for budget in args.budgets.split(","):
         for flight in args.flights.split(","):
@@ -133,7 +141,8 @@ def main():
                 row = {"scene": scene, "width": args.width, "height": args.height, "workload": w,
                        "rays_in_flight": flight, "treelet_bytes": budget,
                        "ratio_to_mbvh8_single": float(r["mem_reads_per_ray"]) / float(base[w]),
-                       "mbvh8_single_mem_reads_per_ray": base[w]}
+                       "mbvh8_single_mem_reads_per_ray": base[w], "mbvh8_single_cold_reads_per_ray": cold.get(w, ""),
+                       "floor_ratio": float(cold[w]) / float(base[w]) if cold.get(w) else ""}
                 row.update({k: r.get(k, "") for k in KEEP})
                 rows.append(row)
             write(args.out, rows)  # after every point: an interrupted sweep resumes
@@ -146,6 +155,9 @@ def main():
               f"{float(b[key]):.3f}x mbvh8_single")
     print(f"best bounce:2 point: rays_in_flight={best['rays_in_flight']} treelet_bytes={best['treelet_bytes']}: "
           f"{float(best['mem_reads_per_ray']):.2f} reads/ray = {float(best['ratio_to_mbvh8_single']):.3f}x mbvh8_single")
+    if best.get("floor_ratio") not in (None, ""):
+        print(f"floor (mbvh8_single's cold reads): {float(best['mbvh8_single_cold_reads_per_ray']):.2f} reads/ray = "
+              f"{float(best['floor_ratio']):.3f}x mbvh8_single: no point can go below it")
 
 
 if __name__ == "__main__":
