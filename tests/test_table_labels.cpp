@@ -1,9 +1,10 @@
 // A table's row names the scheme entry it ran, with the parameters it ran with: `raygrid` and
 // `raygrid:queue=64` are two rows of their own, and the entry's scheme still picks the thesis'
-// layout and rows (harness/table_raygrid.cpp, table_bounce.cpp, tables.cpp's accuracy table; the
-// bandwidth table in test_table_bandwidth.cpp). Before, the raygrid, cache and accuracy tables
-// labelled such rows by the scheme's name, with the entry's parameters missing from `params`, and an
-// entry lost the thesis' layout.
+// layout and rows (harness/table_raygrid.cpp, table_bounce.cpp, table_cache.cpp, tables.cpp's
+// accuracy table; the bandwidth table in test_table_bandwidth.cpp). Before, the raygrid, cache and
+// accuracy tables labelled such rows by the scheme's name, with the entry's parameters missing from
+// `params`, an entry lost the thesis' layout, and the cache table ran RayGrid's rows whatever
+// --schemes said.
 #include <gtest/gtest.h>
 
 #include <set>
@@ -64,6 +65,13 @@ TEST(TableLabels, EntriesWithParametersAreRowsOfTheirOwn) {
     const int ts = t.column("thesis_scheme");
     ASSERT_GE(ts, 0);
     for (size_t i = 0; i < t.rows.size(); ++i) EXPECT_EQ(t.at(i, ts), c.plain);
+  }
+  {
+    // Table 11: the entry as given, and no RayGrid M rows when --schemes leaves raygrid out.
+    const CsvTable t = run_small_table("cache", "room", {"mbvh8_single:order=sort"}, 16, dir);
+    ASSERT_EQ(t.rows.size(), 1u);
+    EXPECT_EQ(t.at(0, t.column("scheme")), "mbvh8_single:order=sort");
+    EXPECT_EQ(t.at(0, t.column("params")), "order=sort");
   }
   {
     // The accuracy table: the entry as given; Embree's two variants carry their robust setting.
