@@ -142,5 +142,40 @@ TEST(TreeletQueue, MemoryReadSplitAddsUpToSimulatedReads) {
   for (const StatColumn& c : t->take_stat_columns()) EXPECT_NE(c.name.rfind("treelet_mem_", 0), 0u) << c.name;
 }
 
+// Cold reads (lines first touched by a load, cachesim/hierarchy.h) as the floor under any
+// reordering: treelet_queue makes mbvh8_single's (order=sort) visits on the same arrays and reads
+// every ray, so its cold reads are at least mbvh8_single's, which its memory reads cannot go under
+// (PERFORMANCE.md, session 24: where issue 19's treelet goal is possible at all). Two budgets, the
+// pool smaller than the batch and not.
+TEST(TreeletQueue, ColdReadsAreAtLeastMBVH8Singles) {
+  Bench& bench = test::bench_for("stadium");
+  auto ref = make_scheme("mbvh8_single", sort_order());
+  ref->prepare(bench.scene(), bench.cache());
+  for (const char* w : {"bounce:2", "rnd"}) {
+    const RayBatch& b = bench.rays(test::small_spec(w, 64));
+    std::vector<Hit> hits(b.size());
+    auto cold_and_reads = [&](const Traverser& t) {
+      cachesim::Hierarchy h(cachesim::parse_config("l1=1K:2,l2=4K:4"));
+      Probe probe;
+      probe.cache = &h;
+      t.trace(b, PacketRange::all(b), hits, probe);
+      EXPECT_GE(h.memory_reads(), h.cold_reads());
+      return std::pair{h.cold_reads(), h.memory_reads()};
+    };
+    const uint64_t base_cold = cold_and_reads(*ref).first;
+    EXPECT_GT(base_cold, 0u);
+    for (const char* budget : {"4096", "262144"})
+      for (const char* flight : {"300", "65536"}) {
+        SchemeConfig cfg;
+        cfg.params = {{"treelet_bytes", budget}, {"rays_in_flight", flight}};
+        auto t = make_scheme("treelet_queue", cfg);
+        t->prepare(bench.scene(), bench.cache());
+        const auto [cold, reads] = cold_and_reads(*t);
+        EXPECT_GE(cold, base_cold) << w << " treelet_bytes=" << budget << " rays_in_flight=" << flight;
+        EXPECT_GE(reads, base_cold) << w << " treelet_bytes=" << budget << " rays_in_flight=" << flight;
+      }
+  }
+}
+
 }  // namespace
 }  // namespace tb
