@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <limits>
 #include <thread>
 #include <cstdio>
 
@@ -182,8 +183,16 @@ void set_interleaved_speed(Record& r, const std::vector<double>& sec, const std:
       .set("mrays_min", *std::min_element(mrays.begin(), mrays.end()))
       .set("mrays_max", *std::max_element(mrays.begin(), mrays.end()))
       .set("mrays_samples", samples_text(mrays))
-      .set("speed_base", base)
-      .set("speed_ratio_median", median_of(ratio))
+      .set("speed_base", base);
+  if (rays == 0) {
+    // A batch without rays (bounce:k of a view whose rays all escaped before bounce k) has no speed
+    // to compare: its rounds time the calls' overhead, so the ratio columns say nan, not a number
+    // a goal table would read as a result.
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    r.set("speed_ratio_median", nan).set("speed_ratio_min", nan).set("speed_ratio_max", nan);
+    return;
+  }
+  r.set("speed_ratio_median", median_of(ratio))
       .set("speed_ratio_min", *std::min_element(ratio.begin(), ratio.end()))
       .set("speed_ratio_max", *std::max_element(ratio.begin(), ratio.end()));
 }

@@ -23,7 +23,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from single_ray_goal import ROOT, default_scenes, fmt_rounds, print_table, run_sized, scene_label  # noqa: E402
+from single_ray_goal import ROOT, default_scenes, div, fmt_rounds, print_table, run_sized, scene_label  # noqa: E402
 
 # cwbvh_single is a single-ray scheme too, and the fastest one on bounce rays of trees beyond the
 # last-level cache (spheres:1M and 2M; docs/PERFORMANCE.md, session 22).
@@ -62,9 +62,9 @@ def main():
             speed = {k: m[("bounce:3", k)] for k in BATCH + SINGLE + ("embree_stream",)}
             batch = max(BATCH, key=speed.get)
             c = cells[s]
-            c[0].append(speed[batch] / max(speed[k] for k in SINGLE))
-            c[1].append(speed[batch] / speed["embree_stream"])
-            c[2].append(batch)
+            c[0].append(div(speed[batch], max(speed[k] for k in SINGLE)))
+            c[1].append(div(speed[batch], speed["embree_stream"]))
+            c[2].append(batch if speed[batch] > 0 else None)
             print(f"round {r}: {s} done", file=sys.stderr)
 
     head = ["scene", "best batch / best single (>= 1.3 on the architectural scenes)", "best batch / embree_stream (>= 1.0)",

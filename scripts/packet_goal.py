@@ -24,7 +24,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from single_ray_goal import ROOT, default_scenes, fmt_rounds, print_table, run, scene_label  # noqa: E402
+from single_ray_goal import ROOT, default_scenes, div, fmt_rounds, print_table, run, scene_label  # noqa: E402
 
 SINGLE = ("mbvh8_single", "embree_single")
 HELDOUT = "/tmp/heldout/heldout.obj"
@@ -61,9 +61,9 @@ def main():
             speed = {k: m[("primary", k)] for k in packets + list(SINGLE) + ["embree_packet8"]}
             best = max(packets, key=speed.get)
             c = cells[s]
-            c[0].append(speed[best] / speed["embree_packet8"])
-            c[1].append(speed[best] / max(speed[k] for k in SINGLE))
-            c[2].append(best)
+            c[0].append(div(speed[best], speed["embree_packet8"]))
+            c[1].append(div(speed[best], max(speed[k] for k in SINGLE)))
+            c[2].append(best if speed[best] > 0 else None)
             print(f"round {r}: {s} done", file=sys.stderr)
 
     head = ["scene", "best packet / embree_packet8 (>= 1.0)", "best packet / best single", "best packet (rounds)"]

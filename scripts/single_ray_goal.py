@@ -51,15 +51,17 @@ def scene_arg(name):
 
 
 def min_rays(csv_path):
-    """The fewest rays of any row of a run CSV (its smallest batch)."""
+    """The fewest rays of any row of a run CSV that has rays (its smallest batch; None when no row has any)."""
     with open(csv_path) as f:
-        return min(int(r["rays"]) for r in csv.DictReader(line for line in f if not line.startswith("#")))
+        rays = [int(r["rays"]) for r in csv.DictReader(line for line in f if not line.startswith("#"))]
+    return min((n for n in rays if n > 0), default=None)
 
 
 def run_sized(travbench, scene, schemes, params, args, csv_path):
     """run(), re-run with --small-reps when a batch holds fewer than --small rays."""
     m = run(travbench, scene, schemes, params, args, csv_path)
-    if min_rays(csv_path) < args.small:
+    fewest = min_rays(csv_path)
+    if fewest is not None and fewest < args.small:
         m = run(travbench, scene, schemes, params, argparse.Namespace(**{**vars(args), "reps": args.small_reps}), csv_path)
     return m
 
@@ -80,8 +82,17 @@ def run(travbench, scene, schemes, params, args, csv_path):
     return {(r["workload"], r["scheme"]): float(r["mrays_median"]) for r in rows}
 
 
+def div(a, b):
+    """A per-round ratio, or None where the denominator's cell traced no rays (a workload can be empty:
+    bounce:k of a view whose rays all escape earlier), so a table says so instead of dividing by 0."""
+    return a / b if b > 0 else None
+
+
 def fmt_rounds(v):
-    """A cell of a goal table: the median (min-max) of its per-round ratios."""
+    """A cell of a goal table: the median (min-max) of its per-round ratios (rounds without rays left out)."""
+    v = [x for x in v if x is not None]
+    if not v:
+        return "n/a (no rays)"
     return f"{statistics.median(v):.3f} ({min(v):.2f}-{max(v):.2f})"
 
 
@@ -137,10 +148,11 @@ def main():
                 best = max(ours_schemes, key=lambda k: a[(w, k)])
                 ours, robust, fast = a[(w, best)], a[(w, "embree_single")], a[(w, "embree_single:robust=0")]
                 c = cells.setdefault((s, w), ([], [], [], {}))
-                c[3][best] = c[3].get(best, 0) + 1
-                c[0].append(ours / robust)
-                c[1].append(fast / robust)
-                c[2].append(ours / fast)
+                if ours > 0:
+                    c[3][best] = c[3].get(best, 0) + 1
+                c[0].append(div(ours, robust))
+                c[1].append(div(fast, robust))
+                c[2].append(div(ours, fast))
             print(f"round {r}: {s} done", file=sys.stderr)
 
     ours_name = ours_schemes[0] if len(ours_schemes) == 1 else "best single"

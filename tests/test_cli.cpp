@@ -11,6 +11,7 @@
 #include <set>
 #include <thread>
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -350,6 +351,36 @@ TEST(CLI, InterleavedRunGivesPerRoundRatiosToTheFirstScheme) {
   const nlohmann::json meta = nlohmann::json::parse(js);
   EXPECT_EQ(meta.at("interleave"), true);
   expect_says(travbench(sweep + " --resume"), 2, "--interleave");
+  std::filesystem::remove_all(dir);
+}
+
+// A workload without rays (the sphere is convex: every bounce:1 ray escapes, so bounce:2 has none)
+// has no speed to compare: its interleaved rows say nan in the ratio columns, not the ratio of two
+// traces of nothing (a goal script read such a ratio as 1.6x before).
+TEST(CLI, InterleavedRunWithoutRaysHasNoSpeedRatio) {
+  const auto dir = test::temp_dir("cli_interleave_empty");
+  const std::string csv = (dir / "e.csv").string();
+  const Result r = travbench("run --scene sphere --schemes mbvh8_single,bvh_single --workloads bounce:1,bounce:2 "
+                             "--width 32 --height 32 --reps 3 --interleave --csv " + csv);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::vector<std::string> lines = lines_of(csv);
+  ASSERT_EQ(lines.size(), 5u);
+  std::vector<std::string> head;
+  std::stringstream hs(lines[0]);
+  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  int empty = 0;
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::map<std::string, std::string> row;
+    std::stringstream rs(lines[i]);
+    size_t c = 0;
+    for (std::string v; std::getline(rs, v, ',') && c < head.size(); ++c) row[head[c]] = v;
+    const bool none = row["rays"] == "0";
+    EXPECT_EQ(none, row["workload"] == "bounce:2") << lines[i];
+    for (const char* k : {"speed_ratio_median", "speed_ratio_min", "speed_ratio_max"})
+      EXPECT_EQ(std::isnan(std::stod(row[k])), none) << k << ": " << lines[i];
+    empty += none;
+  }
+  EXPECT_EQ(empty, 2);
   std::filesystem::remove_all(dir);
 }
 
