@@ -214,6 +214,23 @@ std::vector<std::string> lines_of(const std::string& path) {
   return lines;
 }
 
+// The rows of a CSV travbench wrote (no quoted fields), each as column -> value.
+std::vector<std::map<std::string, std::string>> rows_of(const std::string& path) {
+  const std::vector<std::string> lines = lines_of(path);
+  std::vector<std::map<std::string, std::string>> rows;
+  if (lines.empty()) return rows;
+  std::vector<std::string> head;
+  std::stringstream hs(lines[0]);
+  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  for (size_t i = 1; i < lines.size(); ++i) {
+    std::map<std::string, std::string>& row = rows.emplace_back();
+    std::stringstream rs(lines[i]);
+    size_t c = 0;
+    for (std::string v; std::getline(rs, v, ',') && c < head.size(); ++c) row[head[c]] = v;
+  }
+  return rows;
+}
+
 // The (workload, scheme) cells of a run CSV, each once: a duplicate fails the test.
 std::set<std::string> cells_of(const std::string& path) {
   const std::vector<std::string> lines = lines_of(path);
@@ -324,14 +341,9 @@ TEST(CLI, InterleavedRunGivesPerRoundRatiosToTheFirstScheme) {
   ASSERT_EQ(r.code, 0) << r.out;
   const std::vector<std::string> lines = lines_of(csv);
   ASSERT_EQ(lines.size(), 7u);
-  std::vector<std::string> head;
-  std::stringstream hs(lines[0]);
-  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  const auto rows = rows_of(csv);
   for (size_t i = 1; i < lines.size(); ++i) {
-    std::map<std::string, std::string> row;
-    std::stringstream rs(lines[i]);
-    size_t c = 0;
-    for (std::string v; std::getline(rs, v, ',') && c < head.size(); ++c) row[head[c]] = v;
+    auto row = rows[i - 1];
     EXPECT_EQ(row["reps"], "3") << lines[i];
     EXPECT_EQ(std::count(row["mrays_samples"].begin(), row["mrays_samples"].end(), ';'), 2) << lines[i];
     EXPECT_EQ(row["speed_base"], "mbvh8_single") << lines[i];
@@ -363,21 +375,14 @@ TEST(CLI, InterleavedRunWithoutRaysHasNoSpeedRatio) {
   const Result r = travbench("run --scene sphere --schemes mbvh8_single,bvh_single --workloads bounce:1,bounce:2 "
                              "--width 32 --height 32 --reps 3 --interleave --csv " + csv);
   ASSERT_EQ(r.code, 0) << r.out;
-  const std::vector<std::string> lines = lines_of(csv);
-  ASSERT_EQ(lines.size(), 5u);
-  std::vector<std::string> head;
-  std::stringstream hs(lines[0]);
-  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  const auto rows = rows_of(csv);
+  ASSERT_EQ(rows.size(), 4u);
   int empty = 0;
-  for (size_t i = 1; i < lines.size(); ++i) {
-    std::map<std::string, std::string> row;
-    std::stringstream rs(lines[i]);
-    size_t c = 0;
-    for (std::string v; std::getline(rs, v, ',') && c < head.size(); ++c) row[head[c]] = v;
+  for (auto row : rows) {
     const bool none = row["rays"] == "0";
-    EXPECT_EQ(none, row["workload"] == "bounce:2") << lines[i];
+    EXPECT_EQ(none, row["workload"] == "bounce:2") << row["scheme"] << " " << row["workload"];
     for (const char* k : {"speed_ratio_median", "speed_ratio_min", "speed_ratio_max"})
-      EXPECT_EQ(std::isnan(std::stod(row[k])), none) << k << ": " << lines[i];
+      EXPECT_EQ(std::isnan(std::stod(row[k])), none) << k << ": " << row["scheme"] << " " << row["workload"];
     empty += none;
   }
   EXPECT_EQ(empty, 2);
