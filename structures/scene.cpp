@@ -1,5 +1,7 @@
 #include "structures/scene.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 
 namespace tb {
@@ -19,9 +21,18 @@ AABB Scene::triangle_bounds(uint32_t tri) const {
 
 void Scene::validate() const {
   if (triangles.empty()) throw InputError("scene '" + name + "' has no triangles");
-  for (size_t i = 0; i < positions.size(); ++i)
+  for (size_t i = 0; i < positions.size(); ++i) {
     if (!is_finite(positions[i]))
       throw InputError("scene '" + name + "': vertex " + std::to_string(i) + " has a NaN or Inf coordinate");
+    // The traceable range (vec3.h, kCoordLimit; the file loaders flush denormals first).
+    if (!in_coord_range(positions[i])) {
+      const Vec3 p = positions[i];
+      const bool big = std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)}) > kCoordLimit;
+      throw InputError("scene '" + name + "': vertex " + std::to_string(i) + " has a " +
+                       (big ? "coordinate beyond +-2^56 (7.2e16)" : "denormal coordinate") +
+                       ", outside the range travbench traces");
+    }
+  }
   for (size_t t = 0; t < triangles.size(); ++t)
     for (uint32_t i : triangles[t])
       if (i >= positions.size())
@@ -44,13 +55,29 @@ void Scene::ensure_views() {
   if (!views.empty()) return;
   AABB b = bounds();
   Vec3 c = b.centre(), e = b.extent();
+  // A scene without extent (every vertex on one point) or far thinner than its distance from the
+  // origin would put the eye on the centre in float (a zero view direction): its corners are then
+  // placed 2^-12 of the centre's magnitude (or 1) away.
+  const float m = std::max({std::fabs(c.x), std::fabs(c.y), std::fabs(c.z)});
+  if (std::max({e.x, e.y, e.z}) <= m * 0x1p-20f) {
+    const float s = m > 0.f ? m * 0x1p-12f : 1.f;
+    e = {s, s, s};
+  }
   // Three corners at 0.9x the half-diagonal beyond the box, all looking at the centre.
   const Vec3 dirs[3] = {{1, 0.6f, 1}, {-1, 0.4f, 0.8f}, {0.7f, 0.9f, -1}};
   const char* names[3] = {"corner1", "corner2", "corner3"};
   for (int i = 0; i < 3; ++i) {
     Vec3 eye = c + dirs[i] * e * 0.95f;
+    // A scene near the edge of the traceable range keeps its eyes inside it (vec3.h, kCoordLimit).
+    for (int a = 0; a < 3; ++a) eye[a] = std::clamp(eye[a], -kCoordLimit, kCoordLimit);
     views.push_back({names[i], eye, c, {0, 1, 0}, 60.f});
   }
+}
+
+void Scene::flush_denormals() {
+  for (auto& p : positions)
+    for (int a = 0; a < 3; ++a)
+      if (is_denormal(p[a])) p[a] = 0.f;
 }
 
 void Scene::translate(Vec3 offset) {

@@ -33,8 +33,12 @@ struct Scene {
   Vec3 vertex(uint32_t tri, int corner) const { return positions[triangles[tri][corner]]; }
   AABB bounds() const;
   AABB triangle_bounds(uint32_t tri) const;
-  // Rejects NaN/Inf coordinates, out-of-range indices and empty scenes with an InputError.
+  // Rejects NaN/Inf coordinates, coordinates outside the traceable range (vec3.h, kCoordLimit),
+  // out-of-range indices and empty scenes with an InputError.
   void validate() const;
+  // Reads denormal coordinates as 0, as every tracing thread would (DAZ): a file's 1e-40 is
+  // traced and checked against the exact reference as the same 0 (the file loaders call it).
+  void flush_denormals();
   // FNV-1a over positions and indices: identifies the geometry in provenance records.
   uint64_t content_hash() const;
   // Derives three views from the bounds (outside three corners, looking at the centre) when the

@@ -1,6 +1,7 @@
 // Dispatch by extension, the checks every format shares, and camera views from scenes.json.
 #include "structures/scene_loader.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -87,6 +88,8 @@ Vec3 json_vec3(const nlohmann::json& j, const std::string& json_path, const std:
     v[i] = j[i].get<float>();
   }
   if (!is_finite(v)) throw InputError(detail::error_line(json_path, what + " has a non-finite or out-of-range component"));
+  if (std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}) > kCoordLimit)
+    throw InputError(detail::error_line(json_path, what + " has a component beyond +-2^56 (7.2e16), the range travbench traces"));
   return v;
 }
 
@@ -141,10 +144,15 @@ std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
         cv.vfov_deg = v["vfov_deg"].get<float>();
       }
       if (cv.eye == cv.target) throw InputError(detail::error_line(jp, vw + ": eye equals target"));
-      if (!(cv.vfov_deg > 0.f && cv.vfov_deg < 180.f))
-        throw InputError(detail::error_line(jp, vw + ": vfov_deg must be in (0, 180)"));
-      Vec3 fwd = cv.target - cv.eye;
-      if (length(cross(fwd, cv.up)) <= 1e-6f * length(fwd) * length(cv.up))
+      // Below 1e-3 degrees a pixel's direction offsets vanish against the forward vector in float.
+      if (!(cv.vfov_deg >= 1e-3f && cv.vfov_deg < 180.f))
+        throw InputError(detail::error_line(jp, vw + ": vfov_deg must be in [0.001, 180)"));
+      // In double: the float products of far-apart eyes and targets or of a huge `up` overflow.
+      const double f[3] = {double(cv.target.x) - cv.eye.x, double(cv.target.y) - cv.eye.y, double(cv.target.z) - cv.eye.z};
+      const double u[3] = {cv.up.x, cv.up.y, cv.up.z};
+      const double side[3] = {f[1] * u[2] - f[2] * u[1], f[2] * u[0] - f[0] * u[2], f[0] * u[1] - f[1] * u[0]};
+      auto len = [](const double* a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); };
+      if (len(side) <= 1e-6 * len(f) * len(u))
         throw InputError(detail::error_line(jp, vw + ": up is zero or parallel to the view direction"));
       out.push_back(cv);
     }
@@ -172,6 +180,7 @@ Scene load_scene_file(const std::string& path) {
         path, (ext.empty() ? std::string("file has no extension") : "unknown scene file extension '" + ext + "'") +
                   " (expected .gltf, .glb, .obj, .ply, .off or .stl)"));
   s.name = detail::file_stem(path);
+  s.flush_denormals();
   try {
     s.validate();
   } catch (const InputError& e) {

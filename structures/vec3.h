@@ -34,6 +34,20 @@ inline Vec3 vmin(Vec3 a, Vec3 b) { return {std::min(a.x, b.x), std::min(a.y, b.y
 inline Vec3 vmax(Vec3 a, Vec3 b) { return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}; }
 inline bool is_finite(Vec3 a) { return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z); }
 
+// The coordinates travbench traces: scene vertices and ray origins and directions with |x| <= 2^56
+// (7.2e16), directions whose largest component is >= 2^-56, and no denormal component. Why: the
+// node tests carry a per-ray error bound proportional to (|scene| + |origin|) / |direction| and
+// leave an axis out where it would exceed 2^100 (kernels.h, FusedPlanes; the compressed BVH's decode
+// needs 8 ulps of it); inside these limits the dominant axis of every ray is always kept, so no
+// node test degenerates into "every child entered" (which took the unused child slots of an MBVH
+// node with it: a crash). Every thread that traces reads denormals as 0 (DAZ, trace_runner.h), so a
+// denormal would be traced as a different ray or scene than the exact reference sees. Embree's own
+// valid range is |x| <= 1.844e18 (its FLT_LARGE), so a valid ray is valid for the baselines too.
+inline constexpr float kCoordLimit = 0x1p56f;
+inline bool is_denormal(float x) { return x != 0.f && std::fabs(x) < std::numeric_limits<float>::min(); }
+inline bool in_coord_range(float x) { return std::fabs(x) <= kCoordLimit && !is_denormal(x); }
+inline bool in_coord_range(Vec3 a) { return in_coord_range(a.x) && in_coord_range(a.y) && in_coord_range(a.z); }
+
 struct AABB {
   Vec3 lo{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
           std::numeric_limits<float>::infinity()};

@@ -223,6 +223,12 @@ TEST_F(BadInput, UnknownNamesAreOneLine) {
   expect_rejected("run --scene sphere@1,2" + csv, {"--scene", "sphere@1,2"});
   expect_rejected("run --scene sphere@nan,0,0" + csv, {"--scene", "sphere@nan,0,0"});
   expect_rejected("run --scene sphere@1e39,0,0" + csv, {"--scene"});
+  // Trailing text after the offset was ignored; an offset that flattens every triangle to zero
+  // area (float spacing at 1e30 is 2^70) traced an empty scene.
+  expect_rejected("run --scene sphere@1,2,3xyz" + csv, {"--scene", "sphere@1,2,3xyz"});
+  expect_rejected("run --scene sphere@1,2,3,4" + csv, {"--scene", "sphere@1,2,3,4"});
+  expect_rejected("run --scene sphere@1e16,1e16,1e16" + csv, {"--scene", "collapses all"});
+  expect_rejected("run --scene sphere@1e17,0,0" + csv, {"--scene", "2^56"});
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -273,6 +279,9 @@ TEST_F(BadInput, SceneFilesAreRejectedWithFileAndReason) {
                "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 inf 0\n0 1 0\n3 0 1 2\n",
                {"vertex 1 has a NaN or Inf"});
+  // Coordinates beyond the traceable range (structures/vec3.h, kCoordLimit), every format's path.
+  expect_scene("far.obj", "v 1e20 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", {"vertex 0", "beyond +-2^56"});
+  expect_scene("far.off", "OFF\n3 1 0\n0 0 0\n1 -8e16 0\n0 1 0\n3 0 1 2\n", {"vertex 1", "beyond +-2^56"});
   {
     std::string stl(80, '\0');
     put<uint32_t>(stl, 1);
@@ -432,6 +441,17 @@ TEST_F(BadInput, RayFilesAreRejectedWithFileAndReason) {
   bad_ray("inftmin.bin", {{0, 0, 0}, inf, {0, 0, 1}, inf}, "ray 1 has a NaN or Inf");
   bad_ray("zerodir.bin", {{0, 0, 0}, 0, {0, -0.f, 0}, 1}, "ray 1 has a zero direction");
   bad_ray("negtmin.bin", {{0, 0, 0}, -1, {0, 0, 1}, 1}, "ray 1 has a negative tmin");
+  // Beyond the traceable range (structures/vec3.h, kCoordLimit): these crashed mbvh8_single,
+  // treelet_queue, mbvh_rs and raygrid (an all-denormal direction is a zero one under DAZ, a
+  // huge one has a reciprocal flushed to 0: every node test entered every child slot) and abort
+  // Embree (its ray.valid() assertion) beyond 1.844e18.
+  bad_ray("denormdir.bin", {{0, 0, 5}, 0, {0, 0, -1e-38f}, 1e30f}, "ray 1: dir.z is a denormal");
+  bad_ray("denormorg.bin", {{1e-40f, 0, 5}, 0, {0, 0, -1}, 1e30f}, "ray 1: org.x is a denormal");
+  bad_ray("denormtmin.bin", {{0, 0, 5}, 1e-40f, {0, 0, -1}, 1e30f}, "ray 1: tmin is a denormal");
+  bad_ray("hugedir.bin", {{0, 0, 5}, 0, {3e38f, 3e38f, -3e38f}, 1}, "ray 1: dir.x = 3e+38 is beyond +-2^56");
+  bad_ray("hugeorg.bin", {{3e38f, 3e38f, 3e38f}, 0, {-1, -1, -1}, 3.4e38f}, "ray 1: org.x = 3e+38 is beyond");
+  bad_ray("farorg.bin", {{0, -1e19f, 0}, 0, {0, 1, 0}, 3.4e38f}, "ray 1: org.y = -1e+19 is beyond");
+  bad_ray("shortdir.bin", {{0, 0, 5}, 0, {1e-18f, 0, -1e-18f}, 1e30f}, "ray 1 has a direction shorter than 2^-56");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -907,6 +907,48 @@ TEST_F(LoaderTest, ScenesJsonListFormAndErrors) {
   const std::string same = write("same/a.obj", tri);
   write("same/scenes.json", R"({"a": {"file": "a.obj", "views": [{"eye": [1, 1, 1], "target": [1, 1, 1]}]}})");
   expect_input_error(same, "eye equals target");
+
+  // Views outside the traceable range, a vanishing field of view, and an eye far from its target
+  // with a huge `up` (the parallel check overflowed in float and blamed `up`).
+  const std::string far = write("far/a.obj", tri);
+  write("far/scenes.json", R"({"a": {"file": "a.obj", "views": [{"eye": [0, 0, 1e20], "target": [0, 0, 0]}]}})");
+  expect_input_error(far, "eye has a component beyond +-2^56");
+  const std::string narrow = write("narrow/a.obj", tri);
+  write("narrow/scenes.json",
+        R"({"a": {"file": "a.obj", "views": [{"eye": [0, 0, 5], "target": [0, 0, 0], "vfov_deg": 1e-30}]}})");
+  expect_input_error(narrow, "vfov_deg must be in [0.001, 180)");
+  const std::string wide = write("wide/a.obj", tri);
+  write("wide/scenes.json",
+        R"({"a": {"file": "a.obj", "views": [{"eye": [0, 0, 7e16], "target": [0, 0, -7e16], "up": [1e16, 0, 0]}]}})");
+  EXPECT_EQ(tb::load_scene_file(wide).views.size(), 1u);
+}
+
+// Derived views of scenes without extent or near the edge of the traceable range: the eyes stay
+// off the centre and inside the range, so every workload's rays are valid (they were "ray 0 has a
+// NaN or Inf component" or "a zero direction" before).
+TEST_F(LoaderTest, DerivedViewsOfDegenerateAndFarScenesGiveValidRays) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"point0.obj", "v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n"},
+      {"point5.obj", "v 5 5 5\nv 5 5 5\nv 5 5 5\nf 1 2 3\n"},
+      {"pointfar.obj", "v 1e16 -1e16 3e16\nv 1e16 -1e16 3e16\nv 1e16 -1e16 3e16\nf 1 2 3\n"},
+      {"edge.obj", "v 7e16 7e16 7e16\nv 6e16 7e16 7e16\nv 7e16 6e16 7e16\nf 1 2 3\n"},
+      {"denormal.obj", "v 1e-40 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
+  };
+  for (const auto& [name, text] : cases) {
+    Scene s = tb::load_scene_file(write("views/" + name, text));
+    s.ensure_views();
+    for (const auto& v : s.views) {
+      EXPECT_FALSE(v.eye == v.target) << name;
+      EXPECT_TRUE(tb::in_coord_range(v.eye)) << name;
+    }
+    for (const char* w : {"primary", "rnd"}) {
+      tb::WorkloadSpec spec = tb::parse_workload(w);
+      spec.width = spec.height = 16;
+      EXPECT_NO_THROW(tb::generate_workload(s, spec, nullptr)) << name << " " << w;
+    }
+  }
+  // A denormal coordinate is read as 0, as every tracing thread reads it (DAZ).
+  EXPECT_EQ(tb::load_scene_file(write("views/denormal.obj", cases.back().second)).positions[0].x, 0.f);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -1,6 +1,9 @@
 #include "workloads/ray_batch.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <string>
 
 #include "structures/scene.h"
 
@@ -26,6 +29,11 @@ void RayBatch::validate() const {
     throw InputError("ray batch: packet table does not cover the rays");
   for (size_t p = 1; p < packet_begin.size(); ++p)
     if (packet_begin[p] < packet_begin[p - 1]) throw InputError("ray batch: packet table is not increasing");
+  auto g = [](float v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", double(v));
+    return std::string(buf);
+  };
   for (size_t i = 0; i < rays.size(); ++i) {
     const Ray& r = rays[i];
     if (!is_finite(r.org) || !is_finite(r.dir) || std::isnan(r.tmin) || std::isnan(r.tmax) ||
@@ -34,6 +42,19 @@ void RayBatch::validate() const {
     if (r.dir.x == 0.f && r.dir.y == 0.f && r.dir.z == 0.f)
       throw InputError("ray " + std::to_string(i) + " has a zero direction");
     if (r.tmin < 0.f) throw InputError("ray " + std::to_string(i) + " has a negative tmin");
+    // The traceable range (structures/vec3.h, kCoordLimit: why, there).
+    const float c[8] = {r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z, r.tmin, r.tmax};
+    for (int k = 0; k < 8; ++k) {
+      static const char* const kField[8] = {"org.x", "org.y", "org.z", "dir.x", "dir.y", "dir.z", "tmin", "tmax"};
+      if (is_denormal(c[k]))
+        throw InputError("ray " + std::to_string(i) + ": " + kField[k] + " is a denormal (" + g(c[k]) +
+                         "), which every tracing thread reads as 0 (DAZ)");
+      if (k < 6 && std::fabs(c[k]) > kCoordLimit)
+        throw InputError("ray " + std::to_string(i) + ": " + kField[k] + " = " + g(c[k]) +
+                         " is beyond +-2^56 (7.2e16), the range travbench traces");
+    }
+    if (std::max({std::fabs(r.dir.x), std::fabs(r.dir.y), std::fabs(r.dir.z)}) < 1.f / kCoordLimit)
+      throw InputError("ray " + std::to_string(i) + " has a direction shorter than 2^-56 (1.4e-17) in every component");
   }
 }
 

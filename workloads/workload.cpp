@@ -281,7 +281,12 @@ RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const C
   } else if (spec.kind.rfind("hard:", 0) == 0) b = hard_case_rays(scene, spec);
   else throw InputError("unknown workload kind '" + spec.kind + "'");
   b.workload = spec.name();
-  b.validate();
+  try {
+    b.validate();
+  } catch (const InputError& e) {  // a generated ray out of range: say which scene and workload made it
+    throw InputError("workload '" + spec.name() + "' of scene '" + scene.name + "': " + e.what() +
+                     " (check the scene's extent and its views)");
+  }
   return b;
 }
 
