@@ -197,6 +197,15 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
     stack.push_back(std::move(w));
   }
   const float pad = o.pad;
+  // References made by all splits together: a scene's triangles are referenced a few times over
+  // ten levels at the thesis' settings (§5.4.1), but leaf_prims near 1 with a deep max_depth keeps
+  // splitting nodes that every triangle of a fan overlaps, up to 4x the references per level (the
+  // explosion guard below) — gigabytes, then an out-of-memory error that blamed the image size.
+  // Nodes likewise: leaf_prims = 1 splits every node of two triangles, and each leaf gets a
+  // mini-BVH of its own.
+  const uint64_t ref_budget = std::max<uint64_t>(64ull * n, 1ull << 24);
+  const uint64_t node_budget = std::max<uint64_t>(16ull * n, 1ull << 20);
+  uint64_t refs_made = 0;
   while (!stack.empty()) {
     Work w = std::move(stack.back());
     stack.pop_back();
@@ -241,6 +250,13 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
       // a fan around a vertex does, splitting separates nothing. (A child that keeps all the
       // parent's triangles is fine: the others are empty space, and the next level separates.)
       if (total > 4 * w.refs.size()) split = false;
+      if (split && ((refs_made += total) > ref_budget || o.nodes.size() + 8 > node_budget))
+        throw InputError("octree: leaf_prims=" + std::to_string(p.leaf_prims) + " with max_depth=" +
+                         std::to_string(p.max_depth) + " makes more than " +
+                         (refs_made > ref_budget ? std::to_string(ref_budget) + " triangle references (64"
+                                                 : std::to_string(node_budget) + " nodes (16") +
+                         " per triangle of the scene, or 2^20 nodes, 2^24 references if more); raise leaf_prims or "
+                         "lower max_depth");
     }
     if (split) {
       const uint32_t first = uint32_t(o.nodes.size());
