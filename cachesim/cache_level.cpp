@@ -38,6 +38,11 @@ void validate_geometry(const std::string& what, uint64_t size_bytes, uint32_t as
   if (assoc < 1 || assoc > 64)
     fail("associativity " + std::to_string(assoc) + " is outside 1..64");
   const uint64_t lines = size_bytes / line_bytes;
+  // The simulator keeps 8-16 bytes of tags per line: 2^26 lines (4 GiB of 64-byte lines) is 1 GiB
+  // of tags; `l1=64G:8` asked for 16 GiB and the host's memory ran out.
+  if (lines > (uint64_t{1} << 26))
+    fail("size " + std::to_string(size_bytes) + " bytes in " + std::to_string(line_bytes) + "-byte lines is " +
+         std::to_string(lines) + " lines, more than the 2^26 (4 GiB of 64-byte lines) the simulator models");
   if (lines % assoc != 0)
     fail("associativity " + std::to_string(assoc) + " does not divide the " +
          std::to_string(lines) + " lines of the cache");

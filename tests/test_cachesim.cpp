@@ -324,6 +324,12 @@ TEST(CacheSim, ParseConfigErrorsNameTheBadField) {
   EXPECT_NE(err("l0=32K:8").find("level name 'l0'"), std::string::npos);
   EXPECT_NE(err("l2=256K:8,l1=32K:8").find("l1 must come after l2"), std::string::npos);
   EXPECT_NE(err("l1=32K:8,l1=32K:8").find("l1 must come after l1"), std::string::npos);
+  // Non-canonical level names (`l01` was accepted and shown as L01) and caches beyond what the
+  // simulator models (l1=64G:8 asked for 16 GiB of tags).
+  EXPECT_NE(err("l01=32K:8").find("level name 'l01' is not l1, l2"), std::string::npos);
+  EXPECT_NE(err("l1=64G:8").find("more than the 2^26"), std::string::npos);
+  EXPECT_NE(err("l1=1G:8:4").find("more than the 2^26"), std::string::npos);
+  EXPECT_NO_THROW(cs::parse_config("l1=32K:8,l2=256K:8,l3=4G:16"));
   EXPECT_NE(err("l4=8M:16").find("no default latency"), std::string::npos);
   EXPECT_NE(err("l1=32K:8:32,l2=256K:8").find("line size 64 differs"), std::string::npos);
   EXPECT_NE(err("l132K:8").find("expected NAME=VALUE"), std::string::npos);
