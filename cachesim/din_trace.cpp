@@ -1,6 +1,7 @@
 #include "cachesim/din_trace.h"
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -30,8 +31,22 @@ std::string_view next_token(std::string_view s, size_t& pos) {
   return s.substr(start, pos - start);
 }
 
+// A token as an error message shows it: at most 40 characters, control and non-ASCII bytes as
+// \xNN (a raw NUL cut the message short, an ESC reached the terminal).
 std::string shorten(std::string_view s) {
-  return s.size() <= 40 ? std::string(s) : std::string(s.substr(0, 37)) + "...";
+  std::string out;
+  const std::string_view cut = s.size() <= 40 ? s : s.substr(0, 37);
+  for (const char ch : cut) {
+    const auto c = static_cast<unsigned char>(ch);
+    if (c >= 0x20 && c < 0x7F) {
+      out += ch;
+    } else {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02X", c);
+      out += buf;
+    }
+  }
+  return s.size() <= 40 ? out : out + "...";
 }
 
 }  // namespace

@@ -383,6 +383,9 @@ TEST(CacheSim, DinErrorsNameFileAndLine) {
   EXPECT_NE(err("0 0x").find("is not hexadecimal"), std::string::npos);
   EXPECT_NE(err("0 -10").find("is not hexadecimal"), std::string::npos);
   EXPECT_NE(err("0 10000000000000000").find("does not fit in 64 bits"), std::string::npos);
+  // Control bytes in a token are shown escaped: a raw NUL cut the message off before its reason.
+  EXPECT_NE(err(std::string("0 10\0zz", 7)).find("address '10\\x00zz' is not hexadecimal"), std::string::npos);
+  EXPECT_NE(err("\x1b[31m 10").find("label '\\x1B[31m' is not a din access type"), std::string::npos);
 }
 
 TEST(CacheSim, RunCachesimCommand) {
