@@ -743,7 +743,9 @@ Scene parse_ply(const std::string& path, const std::string& data) {
             char shown[32];
             std::snprintf(shown, sizeof shown, "%.17g", v);
             throw InputError(error_line(path, "face " + std::to_string(item) + " uses vertex index " + shown +
-                                                  " but there are " + std::to_string(ve->count) + " vertices"));
+                                                  (v == std::floor(v) ? " but there are " + std::to_string(ve->count) +
+                                                                            " vertices"
+                                                                      : std::string(", not an integer"))));
           }
           face.push_back(static_cast<uint32_t>(v));
         }
@@ -762,7 +764,17 @@ Scene parse_ply(const std::string& path, const std::string& data) {
       }
     }
   }
-  // Anything after the last element (trailing newline, padding) carries no geometry.
+  // Anything after the last element carries no geometry: padding of a binary body is ignored, but
+  // values left in an ASCII body mean the header's counts are wrong (more faces than declared, or
+  // extra values on a face line that shifted every later face) and the file was read wrongly.
+  if (h.format == PlyHeader::Ascii && in.remaining() > 0) {
+    const char* rest = data.data() + (data.size() - in.remaining());
+    for (const char* q = rest; q < data.data() + data.size(); ++q)
+      if (!is_blank(*q) && *q != '\n' && *q != '\r')
+        throw InputError(error_line(path, "values after the " + std::to_string(h.elements.back().count) + " '" +
+                                              h.elements.back().name +
+                                              "' elements the header declares (wrong counts, or extra values on a line)"));
+  }
   return s;
 }
 

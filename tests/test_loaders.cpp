@@ -450,6 +450,9 @@ TEST_F(LoaderTest, PlyBadInput) {
       {"neglist.ply", "3 4 3 2", 0, 1, "-4", "list length -4 is negative"},
       {"longlist.ply", "3 4 3 2", 0, 1, "200", "longer than the rest of the file"},
       {"shortface.ply", "3 4 3 2", 0, 7, "2 4 3  ", "face 1 has 2 vertices"},
+      // Values the header does not declare were ignored: a third face, an extra index on the last.
+      {"moreface.ply", "3 4 3 2", 0, 7, "3 4 3 2\n3 0 1 2", "values after the 2 'face' elements"},
+      {"extravalue.ply", "3 4 3 2", 0, 7, "3 4 3 2 7", "values after the 2 'face' elements"},
       // Header corruption: OpenMesh's own header parser loops forever on these.
       {"version.ply", "1.0", 0, 1, {"\0", 1}, "control character in the header"},
       {"count.ply", "vertex 5", 0, 8, "vertex x", "malformed element declaration"},
