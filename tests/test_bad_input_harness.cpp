@@ -1,21 +1,27 @@
-// Bad input the harness reads back from its own earlier output: the CSV a `run --resume` keeps. It
-// may not be trusted blindly: a kept row of another sweep, a cell twice, a nan speed or a CSV read
-// under another header would end up in the finished CSV. (compare's CSVs and options:
-// test_compare.cpp.)
+// Bad input the harness reads back from its own earlier output: the CSV a `run --resume` keeps and
+// the converged-image cache of `table pathtrace`. Neither may be trusted blindly: a kept row of
+// another sweep, a cell twice, a nan speed or a CSV read under another header would end up in the
+// finished CSV; a damaged cache would size an allocation from its header or put a NaN into every
+// rmse. (compare's CSVs and options: test_compare.cpp.)
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "harness/compare.h"  // read_csv
+#include "harness/pathtrace.h"
 #include "harness/sweep.h"
+#include "harness/tables.h"
 #include "structures/scene.h"  // InputError
+#include "test_pathtrace_util.h"
 #include "test_util.h"
 
 namespace fs = std::filesystem;
@@ -164,6 +170,130 @@ TEST_F(Resume, AnotherHeaderIsRefused) {
   expect_refused(lines, {csv_, "'kernel' appears twice"});
   // A header alone (killed before its first row, had that been possible) is checked too.
   expect_refused({"scene,workload"}, {"column 2 is 'workload', a run writes 'triangles' there"});
+}
+
+// ---------------------------------------------------------------------------------------------
+// The converged-image cache of `table pathtrace`
+
+std::string bytes_of(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+void write_bytes(const std::string& path, const std::string& bytes) {
+  std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+}
+
+std::string with_u32(std::string bytes, size_t at, uint32_t v) {
+  std::memcpy(bytes.data() + at, &v, 4);
+  return bytes;
+}
+
+std::string with_float(std::string bytes, size_t pixel_value, float v) {
+  std::memcpy(bytes.data() + 16 + 4 * pixel_value, &v, 4);
+  return bytes;
+}
+
+TEST(PtImageCache, LoadRefusesWhatTheFileDoesNotHold) {
+  const auto dir = test::temp_dir("pt_cache_load");
+  const std::string bin = (dir / "c.bin").string();
+  save_pt_image(bin, PtImage{4, 2, std::vector<float>(24, 0.25f)});
+  const std::string good = bytes_of(bin);
+  PtImage img;
+  std::string why = "x";
+  ASSERT_TRUE(load_pt_image(bin, img, &why));
+  EXPECT_EQ(why, "");
+  EXPECT_EQ(img.width, 4u);
+  EXPECT_EQ(img.rgb.size(), 24u);
+  struct Case {
+    std::string bytes, needle;
+  };
+  const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+  const std::vector<Case> cases = {
+      {with_u32(with_u32(good, 8, 0xFFFFFFFFu), 12, 0xFFFFFFFFu), "declares 4294967295x4294967295 pixels but holds 96"},
+      {with_u32(with_u32(good, 8, 65536), 12, 65536), "declares 65536x65536 pixels"},
+      {with_u32(good, 8, 0), "empty image"},
+      {good.substr(0, good.size() - 4), "holds 92 bytes"},
+      {good + "x", "holds 97 bytes"},
+      {good.substr(0, 10), "no TBPTIMG1 header"},
+      {"TBPTIMGX" + good.substr(8), "no TBPTIMG1 header"},
+      {with_float(good, 5, nan), "pixel 1 holds nan"},
+      {with_float(good, 23, inf), "pixel 7 holds inf"},
+      {with_float(good, 0, -1e30f), "pixel 0 holds -"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.needle);
+    write_bytes(bin, c.bytes);
+    PtImage out{1, 1, {1, 2, 3}};
+    EXPECT_FALSE(load_pt_image(bin, out, &why));
+    EXPECT_NE(why.find(c.needle), std::string::npos) << why;
+    EXPECT_EQ(out.width, 1u) << "left as it was";
+  }
+  EXPECT_FALSE(load_pt_image((dir / "missing.bin").string(), img, &why));
+  EXPECT_EQ(why, "") << "missing: a cache miss, not damage";
+  fs::remove_all(dir);
+}
+
+// A damaged cache is a cache miss with a warning naming the file and what is wrong: the table
+// renders the converged image again, replaces the cache and writes finite rmse columns.
+TEST(PtImageCache, TableRendersADamagedCacheAgain) {
+  const auto dir = test::temp_dir("pt_cache_table");
+  TableOptions opt = test::small_pathtrace_table(
+      (dir / "pt.csv").string(), {{"min_spp", "1"}, {"max_spp", "1"}, {"ref_spp", "2"}, {"seeds", "1"}});
+  ASSERT_EQ(run_table("pathtrace", opt), 0);
+  const std::string bin = (dir / "pt_converged.bin").string(), side = (dir / "pt_converged.json").string();
+  const std::string good_bin = bytes_of(bin), good_side = bytes_of(side);
+  const nlohmann::json meta = nlohmann::json::parse(good_side);
+  auto side_with = [&](const nlohmann::json& residual) {
+    nlohmann::json m = meta;
+    m["residual_rmse"] = residual;
+    return m.dump(2);
+  };
+  struct Case {
+    std::string bin, side, needle;
+  };
+  const std::vector<Case> cases = {
+      {with_u32(with_u32(good_bin, 8, 0xFFFFFFFFu), 12, 0xFFFFFFFFu), good_side, bin + ": declares 4294967295x4294967295"},
+      {with_u32(with_u32(good_bin, 8, 65536), 12, 65536), good_side, bin + ": declares 65536x65536"},
+      {with_u32(with_u32(good_bin, 8, 8), 12, 32), good_side, bin + ": 8x32, the table renders 16x16"},
+      {with_float(good_bin, 7, std::numeric_limits<float>::quiet_NaN()), good_side, bin + ": pixel 2 holds nan"},
+      {good_bin, side_with("x"), side + ": residual_rmse \"x\" is not an rmse"},
+      {good_bin, side_with(-1e300), side + ": residual_rmse -1e+300 is not an rmse"},
+      {good_bin, side_with(nullptr), side + ": residual_rmse is missing"},
+      {good_bin, "[1, 2]", side + ": not a JSON object"},
+      {good_bin, "{", side + ": not a JSON object"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.needle);
+    write_bytes(bin, c.bin);
+    write_bytes(side, c.side);
+    ::testing::internal::CaptureStderr();
+    std::string e;
+    try {
+      EXPECT_EQ(run_table("pathtrace", opt), 0);
+    } catch (const std::exception& ex) {
+      e = ex.what();
+    }
+    const std::string err = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(e, "") << "the table failed";
+    EXPECT_NE(err.find("warning: converged-image cache " + c.needle), std::string::npos) << err;
+    const CsvTable t = read_csv(opt.csv);
+    for (const char* col : {"rmse", "rmse_corr", "converged_residual_rmse", "converged_mean"})
+      for (size_t r = 0; r < t.rows.size(); ++r) {
+        const double v = std::stod(t.at(r, t.column(col)));
+        EXPECT_TRUE(std::isfinite(v) && v >= 0) << col << " " << t.at(r, t.column(col));
+      }
+    PtImage img;
+    EXPECT_TRUE(load_pt_image(bin, img)) << "the cache was replaced";
+    const nlohmann::json now = nlohmann::json::parse(bytes_of(side));
+    EXPECT_TRUE(now["residual_rmse"].is_number() && now["residual_rmse"].get<double>() >= 0) << now.dump();
+  }
+  // A cache of other settings is a plain miss: rendered again without a warning.
+  ::testing::internal::CaptureStderr();
+  opt.run.scheme_config.params["ref_spp"] = "4";
+  EXPECT_EQ(run_table("pathtrace", opt), 0);
+  EXPECT_EQ(::testing::internal::GetCapturedStderr().find("warning"), std::string::npos);
+  fs::remove_all(dir);
 }
 
 }  // namespace
