@@ -3,6 +3,7 @@
 #include <csv.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -60,6 +61,7 @@ CsvTable read_csv(const std::string& path) {
   if (!ok) throw InputError(path + ": not a valid CSV (" + err + " after " + std::to_string(sink.rows.size()) + " rows)");
   if (sink.rows.empty()) throw InputError(path + ": empty CSV (no header)");
   CsvTable t;
+  t.path = path;
   t.header = std::move(sink.rows.front());
   for (size_t i = 1; i < sink.rows.size(); ++i) {
     if (sink.rows[i].size() != t.header.size())
@@ -70,12 +72,31 @@ CsvTable read_csv(const std::string& path) {
   return t;
 }
 
+std::optional<double> parse_number(const std::string& text) {
+  try {
+    size_t used = 0;
+    const double v = std::stod(text, &used);
+    if (used == text.size() && !std::isspace(static_cast<unsigned char>(text.front()))) return v;
+  } catch (const std::exception&) {
+  }
+  return std::nullopt;
+}
+
+// A cell without rays (bounce:k after every ray escaped) timed nothing: `run` writes 0 for it.
+bool is_speed(const std::string& text, bool no_rays) {
+  const std::optional<double> v = parse_number(text);
+  return v && std::isfinite(*v) && (*v > 0 || (*v == 0 && no_rays));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Mann-Whitney U
 
 std::optional<double> mann_whitney_p(const std::vector<double>& a, const std::vector<double>& b) {
   const size_t n1 = a.size(), n2 = b.size();
   if (n1 == 0 || n2 == 0) return std::nullopt;
+  for (const auto* s : {&a, &b})
+    for (double x : *s)
+      if (!std::isfinite(x)) return std::nullopt;  // no rank: the sort below needs a strict weak order
   // U of sample a: pairs where a wins, ties count one half.
   double u = 0;
   bool ties = false;
@@ -90,7 +111,7 @@ std::optional<double> mann_whitney_p(const std::vector<double>& a, const std::ve
   std::sort(all.begin(), all.end());
   double tie_term = 0;
   for (size_t i = 0; i < all.size();) {
-    size_t j = i;
+    size_t j = i + 1;  // always past i: a value unequal to itself (NaN) must not stop the walk
     while (j < all.size() && all[j] == all[i]) ++j;
     const double t = double(j - i);
     if (t > 1) ties = true, tie_term += t * t * t - t;
@@ -157,29 +178,66 @@ const char* const kIdColumns[] = {"scene", "workload", "scheme", "kernel", "para
 // Accuracy columns whose change is reported.
 const char* const kAccuracyColumns[] = {"mismatch_rate", "false_miss", "false_hit", "wrong_t", "ambiguous"};
 
-std::vector<double> parse_samples(const std::string& s) {
+// Where a value sits, for its message: "<file>: row N (scene / workload / scheme)", N the line in
+// the file (the header is line 1).
+std::string where(const CsvTable& t, size_t row) {
+  std::string cell;
+  for (const char* c : {"scene", "workload", "scheme"})
+    if (const std::string& v = t.at(row, t.column(c)); !v.empty()) cell += (cell.empty() ? "" : " / ") + v;
+  return (t.path.empty() ? std::string("(csv)") : t.path) + ": row " + std::to_string(row + 2) +
+         (cell.empty() ? "" : " (" + cell + ")");
+}
+
+double speed(const CsvTable& t, size_t row, const std::string& text, const std::string& col) {
+  const bool no_rays = t.column("rays") >= 0 && t.at(row, t.column("rays")) == "0";
+  if (is_speed(text, no_rays)) return *parse_number(text);
+  throw InputError(where(t, row) + ": " + col + ": '" + text + "' is not a speed (Mrays/s: a finite number > 0" +
+                   (no_rays ? ", or 0 for a cell without rays)" : ")"));
+}
+
+// The ';'-separated repetitions of mrays_samples; an empty field means the row has none.
+std::vector<double> parse_samples(const CsvTable& t, size_t row, int col) {
+  const std::string& s = t.at(row, col);
   std::vector<double> out;
+  if (s.empty()) return out;
+  // An empty sample ("2.9;;2.6", a trailing ';') is a damaged row, not a repetition to skip.
+  if (s.back() == ';') throw InputError(where(t, row) + ": mrays_samples: '" + s + "' ends with an empty sample");
   std::stringstream ss(s);
   for (std::string item; std::getline(ss, item, ';');) {
-    if (item.empty()) continue;
-    try {
-      out.push_back(std::stod(item));
-    } catch (const std::exception&) {
-      throw InputError("mrays_samples: '" + item + "' is not a number");
-    }
+    if (item.empty()) throw InputError(where(t, row) + ": mrays_samples: '" + s + "' has an empty sample");
+    out.push_back(speed(t, row, item, "mrays_samples"));
   }
   return out;
 }
 
-double number(const CsvTable& t, size_t row, int col, const std::string& what) {
+// An accuracy column: a count or a rate, finite and >= 0 (a rate at most 1).
+double accuracy(const CsvTable& t, size_t row, int col, const std::string& name) {
   const std::string& s = t.at(row, col);
-  try {
-    size_t used = 0;
-    const double v = std::stod(s, &used);
-    if (used == s.size()) return v;
-  } catch (const std::exception&) {
-  }
-  throw InputError(what + ": row " + std::to_string(row + 2) + ": '" + s + "' is not a number");
+  const std::optional<double> v = parse_number(s);
+  const bool rate = name == "mismatch_rate";
+  if (v && std::isfinite(*v) && *v >= 0 && (!rate || *v <= 1)) return *v;
+  throw InputError(where(t, row) + ": " + name + ": '" + s + "' is not " +
+                   (rate ? "a rate (a finite number in [0, 1])" : "a count (a finite number >= 0)"));
+}
+
+std::string shown(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+// CLI11's range checks let NaN through (every comparison with it is false), and a NaN here would
+// pass any gate: a NaN --alpha or --min-effect makes every cell "same", a NaN
+// --fail-on-regression turns the gate off. So compare checks its options where it uses them.
+void check_options(const CompareOptions& o) {
+  if (!(std::isfinite(o.alpha) && o.alpha > 0 && o.alpha < 1))
+    throw InputError("compare: --alpha " + shown(o.alpha) + " is not a false discovery rate in (0, 1)");
+  if (!(std::isfinite(o.min_effect_pct) && o.min_effect_pct >= 0 && o.min_effect_pct <= 100))
+    throw InputError("compare: --min-effect " + shown(o.min_effect_pct) + " is not a percentage in [0, 100]");
+  // Negative: no gate (the default). Above 100 no ratio could fall short of it.
+  if (!(std::isfinite(o.fail_on_regression_pct) && o.fail_on_regression_pct <= 100))
+    throw InputError("compare: --fail-on-regression " + shown(o.fail_on_regression_pct) +
+                     " is not a percentage in [0, 100]");
 }
 
 struct Indexed {
@@ -210,6 +268,7 @@ Indexed index(const CsvTable& t, const std::vector<std::string>& ids) {
 }  // namespace
 
 CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const CompareOptions& opt) {
+  check_options(opt);
   for (const CsvTable* t : {&base, &next})
     if (t->column("mrays_median") < 0) throw InputError("compare: a CSV has no mrays_median column (not a run CSV)");
   std::vector<std::string> ids;
@@ -229,12 +288,12 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
     CellComparison c;
     c.key = key;
     c.id = bi.id.at(key);
-    c.base = number(base, br, base.column("mrays_median"), "base mrays_median");
-    c.next = number(next, nr, next.column("mrays_median"), "new mrays_median");
+    c.base = speed(base, br, base.at(br, base.column("mrays_median")), "mrays_median");
+    c.next = speed(next, nr, next.at(nr, next.column("mrays_median")), "mrays_median");
     c.ratio = c.base > 0 ? c.next / c.base : 0;
     const int bs = base.column("mrays_samples"), ns = next.column("mrays_samples");
     if (bs >= 0 && ns >= 0) {
-      const auto a = parse_samples(base.at(br, bs)), b = parse_samples(next.at(nr, ns));
+      const auto a = parse_samples(base, br, bs), b = parse_samples(next, nr, ns);
       c.base_samples = a.size();
       c.next_samples = b.size();
       c.p = mann_whitney_p(b, a);
@@ -243,12 +302,27 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
     for (const char* col : kAccuracyColumns) {
       const int bc = base.column(col), nc = next.column(col);
       if (bc < 0 && nc < 0) continue;
-      const double bv = bc >= 0 && !base.at(br, bc).empty() ? number(base, br, bc, col) : 0;
-      const double nv = nc >= 0 && !next.at(nr, nc).empty() ? number(next, nr, nc, col) : 0;
+      const double bv = bc >= 0 && !base.at(br, bc).empty() ? accuracy(base, br, bc, col) : 0;
+      const double nv = nc >= 0 && !next.at(nr, nc).empty() ? accuracy(next, nr, nc, col) : 0;
       c.accuracy_delta.emplace_back(col, nv - bv);
     }
     if (c.ratio > 0) log_sum += std::log(c.ratio);
     res.cells.push_back(std::move(c));
+  }
+  for (const auto& key : ni.order)
+    if (!bi.row.count(key)) res.only_next.push_back(key);
+  if (res.cells.empty()) {
+    // Nothing was compared: a summary of 0 cells (geometric mean 0.000x) and "ok" would pass a gate.
+    auto first = [](const std::vector<std::string>& keys) {
+      return keys.empty() ? std::string() : " (first: " + keys.front() + ")";
+    };
+    std::string on;
+    for (const auto& c : ids) on += (on.empty() ? "" : ", ") + c;
+    throw InputError("compare: " + (base.path.empty() ? std::string("base") : base.path) + " and " +
+                     (next.path.empty() ? std::string("new") : next.path) + " share no cell, so nothing was compared: " +
+                     std::to_string(res.only_base.size()) + " cells only in base" + first(res.only_base) + ", " +
+                     std::to_string(res.only_next.size()) + " only in new" + first(res.only_next) +
+                     "; cells match on " + on);
   }
   res.geomean_ratio = res.cells.empty() ? 0 : std::exp(log_sum / double(res.cells.size()));
   std::vector<double> scatter;
@@ -298,8 +372,6 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
       c.regression = c.verdict == "n/a" || c.verdict == "slower" || c.verdict == "noise";
     res.failed = res.failed || c.regression;
   }
-  for (const auto& key : ni.order)
-    if (!bi.row.count(key)) res.only_next.push_back(key);
   return res;
 }
 

@@ -25,6 +25,7 @@ namespace tb {
 
 // A CSV as written by write_csv (RFC 4180), header first.
 struct CsvTable {
+  std::string path;  // the file it was read from (messages name it); empty when built in memory
   std::vector<std::string> header;
   std::vector<std::vector<std::string>> rows;
   int column(const std::string& name) const;  // -1 when absent
@@ -32,11 +33,19 @@ struct CsvTable {
 };
 CsvTable read_csv(const std::string& path);  // throws InputError naming the file and line
 
+// The whole text as a double (std::stod alone takes "2.9x" as 2.9); nullopt otherwise. Takes nan and
+// inf: the caller says which values its column allows.
+std::optional<double> parse_number(const std::string& text);
+// Whether `text` is a speed as a run row writes it (Mrays/s): a finite number > 0, or 0 in a row
+// without rays (nothing was timed). `compare` and `run --resume` check speeds by it.
+bool is_speed(const std::string& text, bool no_rays);
+
 // Two-sided Mann-Whitney U test (Mann & Whitney 1947): the probability, under the hypothesis that
 // both samples come from one distribution, of a U statistic at least as far from n1*n2/2 as the
 // observed one. Exact (enumerating the null distribution by counting) when there are no ties and
 // n1*n2 <= 400; otherwise the normal approximation with tie and continuity corrections, as SciPy's
-// mannwhitneyu. Returns nullopt when a sample is empty.
+// mannwhitneyu. Returns nullopt when a sample is empty or holds a value that is not finite (NaN has
+// no rank; compare_runs refuses such samples where it parses them).
 std::optional<double> mann_whitney_p(const std::vector<double>& a, const std::vector<double>& b);
 
 // Benjamini-Hochberg adjusted p-values (q-values, Benjamini & Hochberg 1995): q_(i) =
@@ -91,6 +100,8 @@ struct CompareResult {
   bool failed = false;  // a regression beyond --fail-on-regression
 };
 
+// Throws InputError for options out of range (NaN included), a value that is not a speed or an
+// accuracy (naming the file, the row's cell and the column) and for two CSVs that share no cell.
 CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const CompareOptions& opt = {});
 // Terminal view: one aligned line per cell, the unmatched cells, the summary line.
 void print_comparison(const CompareResult& r, const CompareOptions& opt, FILE* out);

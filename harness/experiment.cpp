@@ -79,6 +79,36 @@ std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, in
   return ref;
 }
 
+namespace {
+// The columns every row of measure_rays starts with, in this order.
+Record row_head(const std::string& scene, uint64_t triangles, const std::string& workload, const std::string& scheme,
+                const RunOptions& opt, uint64_t rays, const ThroughputStats& tp, const Accuracy& acc) {
+  Record r;
+  r.set("scene", scene)
+      .set("triangles", triangles)
+      .set("workload", workload)
+      .set("scheme", scheme)
+      .set("kernel", std::string(kernel_name(opt.scheme_config.kernel)))
+      .set("view", opt.view + 1)
+      .set("rays", rays)
+      .set("threads", opt.threads)
+      .set("reps", opt.reps)
+      .set("mrays_median", tp.mrays_median)
+      .set("mrays_min", tp.mrays_min)
+      .set("mrays_max", tp.mrays_max)
+      .set("mismatch_rate", acc.mismatch_rate())
+      .set("false_miss", acc.false_miss)
+      .set("false_hit", acc.false_hit)
+      .set("wrong_t", acc.wrong_t)
+      .set("ambiguous", acc.ambiguous);
+  return r;
+}
+}  // namespace
+
+std::vector<std::string> run_lead_columns(const RunOptions& opt) {
+  return columns_of({row_head("", 0, "", "", opt, 0, {}, {})});
+}
+
 Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& batch,
                     const std::vector<Hit>& ref, Traverser& scheme, const RunOptions& opt, std::vector<Hit>& hits) {
   hits.assign(batch.size(), Hit{});
@@ -103,24 +133,8 @@ Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& b
     for (auto& th : pool) th.join();
   }
   const Accuracy acc = compare_hits(hits, ref, [&](size_t i) { return amb[i] != 0; });
-  Record r;
-  r.set("scene", bench.scene().name)
-      .set("triangles", uint64_t(bench.scene().num_triangles()))
-      .set("workload", workload)
-      .set("scheme", std::string(scheme.name()))
-      .set("kernel", std::string(kernel_name(opt.scheme_config.kernel)))
-      .set("view", opt.view + 1)
-      .set("rays", uint64_t(batch.size()))
-      .set("threads", opt.threads)
-      .set("reps", opt.reps)
-      .set("mrays_median", tp.mrays_median)
-      .set("mrays_min", tp.mrays_min)
-      .set("mrays_max", tp.mrays_max)
-      .set("mismatch_rate", acc.mismatch_rate())
-      .set("false_miss", acc.false_miss)
-      .set("false_hit", acc.false_hit)
-      .set("wrong_t", acc.wrong_t)
-      .set("ambiguous", acc.ambiguous);
+  Record r = row_head(bench.scene().name, bench.scene().num_triangles(), workload, std::string(scheme.name()), opt,
+                      batch.size(), tp, acc);
   if (opt.stats) {
     TraversalCounts c;
     Probe probe;
@@ -246,8 +260,7 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
     }
     for (size_t s = 0; s < schemes.size(); ++s) {
       const std::string& name = opt.schemes[s];  // the entry, with its own parameters if any
-      if (opt.cells && opt.cells->has(cell_key(spec.name(), name, std::string(kernel_name(opt.scheme_config.kernel)),
-                                               std::to_string(opt.view + 1), params_text(name, opt.scheme_config)))) {
+      if (opt.cells && opt.cells->has(run_cell_key(opt, spec.name(), name))) {
         if (opt.progress)
           std::fprintf(stderr, "[%zu/%zu] %-16s %-14s (in the CSV already)\n", ++done, total, name.c_str(),
                        spec.name().c_str());

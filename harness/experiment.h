@@ -66,6 +66,9 @@ Record measure_cell(Bench& bench, const WorkloadSpec& spec, Traverser& scheme, c
 // hits on `batch`, `workload` labels the row, `hits` receives the scheme's hits.
 Record measure_rays(Bench& bench, const std::string& workload, const RayBatch& batch,
                     const std::vector<Hit>& ref, Traverser& scheme, const RunOptions& opt, std::vector<Hit>& hits);
+// The columns every row of measure_rays (a `run` row) starts with, in order; `run --resume` refuses
+// a CSV whose header does not start with them.
+std::vector<std::string> run_lead_columns(const RunOptions& opt);
 // The reference's hits on a batch that is not one of the bench's workloads.
 std::vector<Hit> reference_hits_of(const Bench& bench, const RayBatch& batch, int threads);
 

@@ -6,7 +6,9 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <filesystem>
 #include <map>
+#include <memory>
 #include <numbers>
 
 #include "harness/image.h"
@@ -539,19 +541,41 @@ void save_pt_image(const std::string& path, const PtImage& img) {
   write_file_durably(path, bytes);
 }
 
-bool load_pt_image(const std::string& path, PtImage& img) {
-  FILE* f = std::fopen(path.c_str(), "rb");
-  if (!f) return false;
+bool load_pt_image(const std::string& path, PtImage& img, std::string* why) {
+  if (why) why->clear();
+  std::error_code ec;
+  const uintmax_t size = std::filesystem::file_size(path, ec);
+  if (ec && !std::filesystem::exists(path)) return false;  // missing: no reason to give
+  auto bad = [&](const std::string& w) {
+    if (why) *why = w;
+    return false;
+  };
+  if (ec) return bad("cannot read its size (" + ec.message() + ")");
+  std::unique_ptr<FILE, int (*)(FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
+  if (!f) return bad("cannot open it");
   char magic[8];
   uint32_t wh[2];
-  bool ok = std::fread(magic, 1, 8, f) == 8 && std::memcmp(magic, kMagic, 8) == 0 && std::fread(wh, 4, 2, f) == 2;
-  if (ok) {
-    img.width = wh[0], img.height = wh[1];
-    img.rgb.resize(size_t(wh[0]) * wh[1] * 3);
-    ok = std::fread(img.rgb.data(), sizeof(float), img.rgb.size(), f) == img.rgb.size() && std::fgetc(f) == EOF;
-  }
-  std::fclose(f);
-  return ok;
+  if (std::fread(magic, 1, 8, f.get()) != 8 || std::memcmp(magic, kMagic, 8) != 0 || std::fread(wh, 4, 2, f.get()) != 2)
+    return bad("not a converged-image cache (no TBPTIMG1 header)");
+  // The declared size must be what the file holds before anything is allocated for it: a header
+  // of 0xFFFFFFFF x 0xFFFFFFFF would otherwise ask for 2^66 bytes.
+  const uint64_t header = sizeof kMagic + sizeof wh, pixels = uint64_t(wh[0]) * wh[1];  // < 2^64
+  const uint64_t bytes_per_pixel = 3 * sizeof(float);
+  if (pixels == 0) return bad("declares an empty image (" + std::to_string(wh[0]) + "x" + std::to_string(wh[1]) + ")");
+  if (size < header || (size - header) % bytes_per_pixel != 0 || (size - header) / bytes_per_pixel != pixels)
+    return bad("declares " + std::to_string(wh[0]) + "x" + std::to_string(wh[1]) + " pixels but holds " +
+               std::to_string(size - std::min<uintmax_t>(size, header)) + " bytes of pixels (" +
+               std::to_string(bytes_per_pixel) + " a pixel)");
+  PtImage out{wh[0], wh[1], std::vector<float>(pixels * 3)};
+  if (std::fread(out.rgb.data(), sizeof(float), out.rgb.size(), f.get()) != out.rgb.size())
+    return bad("cut short while reading its pixels");
+  // Radiance is finite and never negative: a NaN here would make every rmse against it NaN.
+  for (size_t i = 0; i < out.rgb.size(); ++i)
+    if (!std::isfinite(out.rgb[i]) || out.rgb[i] < 0)
+      return bad("pixel " + std::to_string(i / 3) + " holds " + std::to_string(out.rgb[i]) +
+                 ", not a radiance (finite, >= 0)");
+  img = std::move(out);
+  return true;
 }
 
 }  // namespace tb

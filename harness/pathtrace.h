@@ -125,6 +125,9 @@ double pt_mean(const PtImage& img);
 void write_pt_png(const std::string& path, const PtImage& img);
 // Raw cache of a converged image: a small header (magic, width, height) then the floats.
 void save_pt_image(const std::string& path, const PtImage& img);
-bool load_pt_image(const std::string& path, PtImage& img);  // false when missing or malformed
+// False when missing or malformed: a size the file does not hold (checked before anything is
+// allocated), a pixel value that is not a radiance (finite, >= 0). `why`, when given, says what
+// is malformed (empty when the file is missing); `img` is set only on success.
+bool load_pt_image(const std::string& path, PtImage& img, std::string* why = nullptr);
 
 }  // namespace tb

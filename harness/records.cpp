@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sched.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -154,6 +155,17 @@ std::string sidecar_path(const std::string& csv_path) {
 // Written to a temporary file beside `path`, fsync'd, then renamed over it: a reader (or a kill)
 // sees the old file or the new one, never half of either.
 void write_file_durably(const std::string& path, const std::string& text) {
+  // The rename replaces whatever `path` names: a device, FIFO or socket there would be swapped for a
+  // regular file and the write reported done without ever reaching it (as root, `--csv /dev/full`
+  // exited 0 and left /dev/full a regular file). Only a regular file, or nothing, is replaced.
+  struct stat st;
+  if (::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode))
+    throw InputError(path + ": is " +
+                     (S_ISDIR(st.st_mode)                          ? "a directory"
+                      : S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device"
+                      : S_ISFIFO(st.st_mode)                       ? "a FIFO"
+                                                                   : "not a regular file") +
+                     ", not a file it can replace: cannot write the output there");
   const std::string tmp = path + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw InputError(path + ": cannot open for writing (" + std::strerror(errno) + ")");

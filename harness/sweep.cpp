@@ -4,13 +4,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 
-#include "harness/compare.h"  // read_csv
+#include "harness/compare.h"  // read_csv, is_speed
 #include "harness/experiment.h"
 #include "structures/scene.h"  // InputError
 
@@ -24,6 +26,11 @@ std::string cell_key(const std::string& workload, const std::string& scheme, con
 std::string cell_key(const Record& r) {
   auto f = [&](const char* k) { const std::string* v = r.get(k); return v ? *v : std::string(); };
   return cell_key(f("workload"), f("scheme"), f("kernel"), f("view"), f("params"));
+}
+
+std::string run_cell_key(const RunOptions& opt, const std::string& workload, const std::string& entry) {
+  return cell_key(workload, entry, std::string(kernel_name(opt.scheme_config.kernel)), std::to_string(opt.view + 1),
+                  params_text(entry, opt.scheme_config));
 }
 
 namespace {
@@ -102,6 +109,9 @@ CellStream::CellStream(std::string path, nlohmann::json meta, bool resume, const
 // same name as it was.
 void CellStream::open() {
   if (fd_ >= 0) return;
+  // Rows keep_resumed dropped leave the file first (before the descriptor: the rewrite renames a
+  // new file over the old one).
+  if (pruned_) write_file_durably(path_, text()), pruned_ = false;
   fd_ = ::open(path_.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC | (empty_file_ ? O_TRUNC : O_APPEND), 0644);
   if (fd_ < 0) throw InputError(path_ + ": cannot open for writing (" + std::strerror(errno) + ")");
   meta_["status"] = "running";
@@ -112,10 +122,25 @@ CellStream::~CellStream() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-void CellStream::rewrite() {
+std::string CellStream::text() const {
   std::string text = csv_line(cols_, nullptr);
   for (const auto& r : records_) text += csv_line(cols_, &r);
-  write_file_durably(path_, text);
+  return text;
+}
+
+void CellStream::keep_resumed(const std::vector<bool>& keep) {
+  std::vector<Record> kept;
+  for (size_t i = 0; i < records_.size(); ++i)
+    if (i >= resumed_ || keep.at(i)) kept.push_back(std::move(records_[i]));
+  pruned_ = pruned_ || kept.size() < records_.size();
+  resumed_ -= records_.size() - kept.size();
+  records_ = std::move(kept);
+  keys_.clear();
+  for (const auto& r : records_) keys_.insert(cell_key(r));
+}
+
+void CellStream::rewrite() {
+  write_file_durably(path_, text());
   empty_file_ = false;
   ::close(fd_);
   fd_ = ::open(path_.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
@@ -194,6 +219,61 @@ bool CellStream::complete(const std::string& csv) {
   return meta.value("status", "") == "complete";
 }
 
+namespace {
+
+// What `run --resume` keeps of a CSV. It must be a run's CSV (the header starts as a run row
+// does: read by another header, a row's values land in the wrong columns and its cell key is
+// nonsense); each cell of this sweep at most once (the finished CSV would hold it twice) with
+// speeds that are speeds (compare would take a nan as a measurement). Rows of cells this sweep
+// does not have (another scheme, workload or view) are dropped, with a note: the finished CSV
+// holds this sweep's cells, nothing else.
+void check_resumed_rows(CellStream& stream, const RunOptions& opt, const std::string& csv) {
+  const std::string fix = " (remove the CSV or drop --resume)";
+  const std::vector<std::string>& cols = stream.columns();
+  const std::vector<std::string> lead = run_lead_columns(opt);
+  for (size_t i = 0; i < lead.size(); ++i)
+    if (i >= cols.size() || cols[i] != lead[i])
+      throw InputError("--resume: " + csv + " does not have the header this run writes: its column " +
+                       std::to_string(i + 1) + " is " + (i < cols.size() ? "'" + cols[i] + "'" : "missing") +
+                       ", a run writes '" + lead[i] + "' there" + fix);
+  for (size_t i = 0; i < cols.size(); ++i)
+    if (std::find(cols.begin(), cols.begin() + std::ptrdiff_t(i), cols[i]) != cols.begin() + std::ptrdiff_t(i))
+      throw InputError("--resume: " + csv + ": column '" + cols[i] + "' appears twice in its header" + fix);
+  std::set<std::string> sweep;
+  for (const auto& w : opt.workloads)
+    for (const auto& s : opt.schemes) sweep.insert(run_cell_key(opt, parse_workload(w).name(), s));
+  std::map<std::string, size_t> seen;  // cell key -> its line in the CSV
+  std::vector<bool> keep(stream.resumed(), false);
+  size_t dropped = 0;
+  std::string first_dropped;
+  for (size_t i = 0; i < stream.resumed(); ++i) {
+    const Record& r = stream.records()[i];
+    auto f = [&](const char* k) { const std::string* v = r.get(k); return v ? *v : std::string(); };
+    const size_t line = i + 2;  // the header is line 1
+    const std::string cell = "row " + std::to_string(line) + " (" + f("workload") + " / " + f("scheme") +
+                             (f("params").empty() ? "" : " / " + f("params")) + ")";
+    const std::string key = cell_key(r);
+    if (!sweep.count(key)) {
+      if (dropped++ == 0) first_dropped = cell;
+      continue;
+    }
+    if (const auto [it, fresh] = seen.emplace(key, line); !fresh)
+      throw InputError("--resume: " + csv + ": " + cell + " is the cell of row " + std::to_string(it->second) +
+                       " again; a sweep measures a cell once" + fix);
+    for (const char* col : {"mrays_median", "mrays_min", "mrays_max"})
+      if (!is_speed(f(col), f("rays") == "0"))
+        throw InputError("--resume: " + csv + ": " + cell + ": " + col + " '" + f(col) +
+                         "' is not a speed (Mrays/s: a finite number > 0, or 0 for a cell without rays)" + fix);
+    keep[i] = true;
+  }
+  if (dropped == 0) return;
+  std::fprintf(stderr, "%s: --resume drops %zu row(s) that are no cell of this sweep (first: %s)\n", csv.c_str(),
+               dropped, first_dropped.c_str());
+  stream.keep_resumed(keep);
+}
+
+}  // namespace
+
 std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& scene_arg, const std::string& csv,
                               bool resume) {
   const nlohmann::json meta = {{"command", "run"},
@@ -214,6 +294,7 @@ std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& s
   CellStream stream(csv, meta, resume,
                     {"command", "scene_hash", "git_revision", "seed", "width", "height", "view", "reps", "threads",
                      "kernel", "params", "stats", "cache"});
+  if (!stream.columns().empty()) check_resumed_rows(stream, opt, csv);
   if (stream.resumed())
     std::fprintf(stderr, "%s: resuming, %zu cells there already\n", csv.c_str(), stream.resumed());
   opt.cells = &stream;

@@ -30,6 +30,9 @@ struct Scene;  // structures/scene.h
 std::string cell_key(const std::string& workload, const std::string& scheme, const std::string& kernel,
                      const std::string& view, const std::string& params);
 std::string cell_key(const Record& r);
+struct RunOptions;
+// The key of `run`'s cell of workload `workload` (its name) and scheme entry `entry` under `opt`.
+std::string run_cell_key(const RunOptions& opt, const std::string& workload, const std::string& entry);
 
 class CellStream {
  public:
@@ -50,6 +53,11 @@ class CellStream {
   // Every row: the resumed ones first, then the appended ones, in order.
   const std::vector<Record>& records() const { return records_; }
   size_t resumed() const { return resumed_; }
+  // The header of the kept CSV (empty for a fresh sweep).
+  const std::vector<std::string>& columns() const { return cols_; }
+  // Keeps only the resumed rows i with keep[i]; the file is rewritten without the others before
+  // anything is added to it (a sweep that fails first leaves it as it was).
+  void keep_resumed(const std::vector<bool>& keep);
   // Rewrites the sidecar with status "complete" and `extra` merged in.
   void finish(const nlohmann::json& extra = nlohmann::json::object());
 
@@ -69,6 +77,7 @@ class CellStream {
  private:
   void open();
   void rewrite();
+  std::string text() const;  // the whole CSV: header and every row
   std::string path_;
   nlohmann::json meta_;
   int fd_ = -1;
@@ -79,14 +88,16 @@ class CellStream {
   size_t replayed_ = 0;
   nlohmann::json old_hashes_ = nlohmann::json::object();  // scene_hashes of the resumed sweep
   bool empty_file_ = true;  // nothing (not even a header) on disk yet
+  bool pruned_ = false;     // keep_resumed dropped rows the file still holds
 };
 
-struct RunOptions;
 class Bench;
 // `travbench run`: every cell of `opt` on `bench` into `csv` as it finishes; with `resume`, the
 // cells `csv` holds already are kept when the sweep is the same (scene hash, git revision, image
 // size, seed, view, reps, threads, kernel, --param values, --stats/--cache settings), else
-// InputError saying which differs. `scene_arg` is the scene as the user named it (sidecar).
+// InputError saying which differs. Of the kept rows only the cells of this sweep stay (the others
+// are dropped, with a note); a header other than a run's, a cell twice or a speed that is not one
+// is refused (InputError naming the row). `scene_arg` is the scene as the user named it (sidecar).
 std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& scene_arg, const std::string& csv,
                               bool resume);
 

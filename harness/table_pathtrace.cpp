@@ -58,6 +58,11 @@ PtImage converged_image(const std::string& stem, const nlohmann::json& key, cons
                         double& residual) {
   const std::string bin = stem + "_converged.bin", side = stem + "_converged.json";
   PtImage img;
+  // A cache is only a cache: one of other settings (another key) is rendered again silently, one
+  // that is damaged (not JSON, a residual_rmse that is no rmse, an image that does not load or has
+  // another size) with a warning naming the file and what is wrong, then rendered again and
+  // replaced. Nothing in it is used unchecked: a NaN pixel or residual would be every cell's rmse.
+  std::string damaged;
   std::ifstream in(side);
   if (in) {
     nlohmann::json have;
@@ -66,13 +71,29 @@ PtImage converged_image(const std::string& stem, const nlohmann::json& key, cons
     } catch (const nlohmann::json::exception&) {
       have = nullptr;
     }
-    if (have.is_object() && have.value("key", nlohmann::json()) == key && have.contains("residual_rmse") &&
-        load_pt_image(bin, img) && img.width == base.width && img.height == base.height) {
+    const nlohmann::json none;
+    const nlohmann::json& res = have.is_object() && have.contains("residual_rmse") ? have["residual_rmse"] : none;
+    std::string why;
+    if (!have.is_object()) {
+      damaged = side + ": not a JSON object";
+    } else if (have.value("key", nlohmann::json()) != key) {
+      // another sweep's image: not damaged, just not this one
+    } else if (!res.is_number() || !std::isfinite(res.get<double>()) || res.get<double>() < 0) {
+      damaged = side + ": residual_rmse " + (res.is_null() ? std::string("is missing") : res.dump() + " is not an rmse") +
+                " (a finite number >= 0)";
+    } else if (!load_pt_image(bin, img, &why)) {
+      damaged = bin + ": " + (why.empty() ? std::string("missing") : why);
+    } else if (img.width != base.width || img.height != base.height) {
+      damaged = bin + ": " + std::to_string(img.width) + "x" + std::to_string(img.height) + ", the table renders " +
+                std::to_string(base.width) + "x" + std::to_string(base.height);
+    } else {
       reused = true;
-      residual = have["residual_rmse"].get<double>();
+      residual = res.get<double>();
       return img;
     }
   }
+  if (!damaged.empty())
+    std::fprintf(stderr, "warning: converged-image cache %s; rendering it again\n", damaged.c_str());
   reused = false;
   PtOptions o = base;
   o.spp = key.at("spp").get<uint32_t>() / 2;

@@ -1,11 +1,21 @@
 // travbench compare: the Mann-Whitney U test against SciPy's values, CSV reading through libcsv,
 // and cell matching (ratios, unmatched cells, accuracy deltas, the regression gate).
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
+#include <functional>
+#include <limits>
 #include <random>
 #include <sstream>
 
 #include "harness/compare.h"
+#include "harness/records.h"
 #include "test_util.h"
 
 namespace tb {
@@ -209,6 +219,207 @@ TEST(Compare, SummaryNamesTheCorrectionAndWarnsWhenTheRepetitionsCannotReachIt) 
   // 9 repetitions can: the changed scheme's 8 cells are marked.
   const CsvTable b9 = read_csv(suite_csv("r9_base.csv", 17, 9, 1.0, 5));
   EXPECT_EQ(compare_runs(b9, read_csv(suite_csv("r9_slow.csv", 17, 9, 1.0, 6, "scheme5", 0.8)), opt).slower, 8u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input: values that are not speeds or accuracies, options out of range, nothing to compare,
+// an output that cannot be written.
+
+// Runs `fn` in a child process under a 20-second alarm and returns what it wrote to `out`, or
+// "<killed by signal N>": a hang (a NaN sample stopped the old tie loop for ever) fails the test
+// instead of stalling the suite.
+std::string in_child(const std::function<void(std::string& out)>& fn) {
+  int fds[2];
+  if (pipe(fds) != 0) return "<pipe failed>";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    close(fds[0]);
+    alarm(20);
+    std::string out;
+    fn(out);
+    for (size_t off = 0; off < out.size();) {
+      const ssize_t n = write(fds[1], out.data() + off, out.size() - off);
+      if (n <= 0) break;
+      off += size_t(n);
+    }
+    _exit(0);
+  }
+  close(fds[1]);
+  std::string got;
+  char buf[4096];
+  for (ssize_t n; (n = read(fds[0], buf, sizeof buf)) > 0;) got.append(buf, size_t(n));
+  close(fds[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  if (WIFSIGNALED(status)) return "<killed by signal " + std::to_string(WTERMSIG(status)) + ">";
+  return got;
+}
+
+// The InputError compare_runs throws for these two files, "" when none.
+std::string compare_error(const std::string& base, const std::string& next, const CompareOptions& opt = {}) {
+  return in_child([&](std::string& out) {
+    try {
+      compare_runs(read_csv(base), read_csv(next), opt);
+    } catch (const InputError& e) {
+      out = e.what();
+    }
+  });
+}
+
+TEST(MannWhitney, NonFiniteSamplesHaveNoRankAndNeverHang) {
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  const std::string r = in_child([&](std::string& out) {
+    for (const auto& a : std::vector<std::vector<double>>{{nan, 1}, {1, nan, 2, 3}, {inf, 1}, {nan, nan}})
+      out += mann_whitney_p(a, {2, 3}).has_value() ? "p " : "none ";
+  });
+  EXPECT_EQ(r, "none none none none ");
+}
+
+TEST(Compare, ValuesThatAreNotSpeedsOrAccuraciesNameFileRowAndColumn) {
+  const std::string head = "scene,workload,scheme,rays,mrays_median,mrays_samples,mismatch_rate,false_miss\n";
+  const std::string good_row = "room,primary,bvh_single,4096,10,10;10.1;9.9,0,0\n";
+  const auto good = write_file("good.csv", head + good_row);
+  struct Case {
+    std::string row;
+    std::vector<std::string> needles;
+  };
+  const std::vector<Case> cases = {
+      {"room,primary,bvh_single,4096,10,10;nan;9.9,0,0", {"mrays_samples", "'nan'"}},
+      {"room,primary,bvh_single,4096,10,10;;9.9,0,0", {"mrays_samples", "empty sample"}},
+      {"room,primary,bvh_single,4096,10,10;9.9;,0,0", {"mrays_samples", "empty sample"}},
+      {"room,primary,bvh_single,4096,10,;10,0,0", {"mrays_samples", "empty sample"}},
+      {"room,primary,bvh_single,4096,10,10;inf;9.9,0,0", {"mrays_samples", "'inf'"}},
+      {"room,primary,bvh_single,4096,10,10;-1;9.9,0,0", {"mrays_samples", "'-1'"}},
+      {"room,primary,bvh_single,4096,10,10;0;9.9,0,0", {"mrays_samples", "'0'"}},
+      {"room,primary,bvh_single,4096,10,10;9.9x,0,0", {"mrays_samples", "'9.9x'"}},
+      {"room,primary,bvh_single,4096,nan,10;10.1;9.9,0,0", {"mrays_median", "'nan'"}},
+      {"room,primary,bvh_single,4096,-10,10;10.1;9.9,0,0", {"mrays_median", "'-10'"}},
+      {"room,primary,bvh_single,4096,0,10;10.1;9.9,0,0", {"mrays_median", "'0'"}},
+      {"room,primary,bvh_single,4096,1e999,10;10.1;9.9,0,0", {"mrays_median", "'1e999'"}},
+      {"room,primary,bvh_single,4096,10,10;10.1;9.9,nan,0", {"mismatch_rate", "'nan'"}},
+      {"room,primary,bvh_single,4096,10,10;10.1;9.9,-0.5,0", {"mismatch_rate", "'-0.5'"}},
+      {"room,primary,bvh_single,4096,10,10;10.1;9.9,1.5,0", {"mismatch_rate", "'1.5'"}},
+      {"room,primary,bvh_single,4096,10,10;10.1;9.9,0,-1", {"false_miss", "'-1'"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.row);
+    const auto bad = write_file("bad.csv", head + c.row + "\n");
+    for (const bool bad_is_base : {true, false}) {
+      const std::string e = bad_is_base ? compare_error(bad, good) : compare_error(good, bad);
+      for (const std::string& n : c.needles) EXPECT_NE(e.find(n), std::string::npos) << "'" << n << "' in: " << e;
+      EXPECT_NE(e.find(bad + ": row 2 (room / primary / bvh_single): "), std::string::npos) << e;
+    }
+  }
+  // A cell without rays timed nothing: run writes 0 for it, which is no error.
+  const std::string none_head = "scene,workload,scheme,rays,mrays_median,mrays_samples\n";
+  const auto none = write_file("norays.csv", none_head + "sphere,bounce:2,bvh_single,0,0,0;0;0\n");
+  EXPECT_EQ(compare_error(none, none), "");
+}
+
+TEST(Compare, OptionsOutOfRangeAndNaNAreRefused) {
+  const auto csv = write_file("opt.csv", "scene,workload,scheme,mrays_median,mrays_samples\nroom,primary,bvh_single,10,"
+                                         "10;10.1;9.9\n");
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(compare_error(csv, csv), "");
+  for (double v : {nan, 0.0, 1.0, -0.1, inf}) {
+    CompareOptions o;
+    o.alpha = v;
+    EXPECT_NE(compare_error(csv, csv, o).find("--alpha"), std::string::npos) << v;
+  }
+  for (double v : {nan, -1.0, 100.5, inf}) {
+    CompareOptions o;
+    o.min_effect_pct = v;
+    EXPECT_NE(compare_error(csv, csv, o).find("--min-effect"), std::string::npos) << v;
+  }
+  for (double v : {nan, 100.5, inf, -inf}) {
+    CompareOptions o;
+    o.fail_on_regression_pct = v;
+    EXPECT_NE(compare_error(csv, csv, o).find("--fail-on-regression"), std::string::npos) << v;
+  }
+  CompareOptions off;  // the default -1: no gate
+  off.fail_on_regression_pct = -1;
+  EXPECT_EQ(compare_error(csv, csv, off), "");
+}
+
+TEST(Compare, CsvsWithoutACommonCellAreAnError) {
+  const std::string head = "scene,workload,scheme,mrays_median\n";
+  const auto a = write_file("cell_a.csv", head + "room,primary,bvh_single,10\n");
+  const auto b = write_file("cell_b.csv", head + "room,primary,kd_single,10\n");
+  const std::string e = compare_error(a, b);
+  for (const std::string& n : std::vector<std::string>{a, b, "share no cell",
+                                                        "1 cells only in base (first: room / primary / bvh_single)",
+                                                        "1 only in new (first: room / primary / kd_single)"})
+    EXPECT_NE(e.find(n), std::string::npos) << "'" << n << "' in: " << e;
+  EXPECT_NE(compare_error(write_file("empty.csv", head), a).find("share no cell"), std::string::npos);
+}
+
+// The output goes to a temporary file renamed over the path: a FIFO (or, as root, a device such as
+// /dev/full) there was replaced by a regular file and the write reported done.
+TEST(Compare, CsvOutputThatIsNotARegularFileIsAnError) {
+  const auto dir = test::temp_dir("compare_fifo");
+  const std::string fifo = (dir / "cmp.csv").string();
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  Record r;
+  r.set("a", 1);
+  try {
+    write_csv(fifo, {r});
+    ADD_FAILURE() << "no error for a FIFO";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(fifo + ": is a FIFO"), std::string::npos) << e.what();
+  }
+  struct stat st;
+  ASSERT_EQ(stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced";
+  EXPECT_FALSE(std::filesystem::exists(dir / "cmp.csv.tmp"));
+  std::filesystem::remove_all(dir);
+}
+
+// The same through the binary, which must never hang on them: one error line, exit 2 (the
+// comparison itself is printed before --csv is written).
+TEST(Compare, CommandRefusesBadValuesOptionsAndOutputs) {
+  const auto dir = test::temp_dir("compare_cli");
+  auto file = [&](const std::string& name, const std::string& text) {
+    const std::string p = (dir / name).string();
+    std::ofstream(p) << text;
+    return p;
+  };
+  const std::string head = "scene,workload,scheme,mrays_median,mrays_samples\n";
+  const auto base = file("base.csv", head + "room,primary,bvh_single,10,10;10.1;9.9;10.2;9.8\n");
+  const auto slow = file("slow.csv", head + "room,primary,bvh_single,5,5;5.1;4.9;5.2;4.8\n");
+  const auto nan = file("nan.csv", head + "room,primary,bvh_single,10,2.9;nan;2.6\n");
+  const auto other = file("other.csv", head + "room,primary,kd_single,10,10;10.1;9.9;10.2;9.8\n");
+  const std::string err_file = (dir / "stderr.txt").string();
+  auto travbench = [&](const std::string& args) {  // exit status and stderr
+    const std::string cmd =
+        "timeout 60 " + std::string(TRAVBENCH_BINARY) + " compare " + args + " </dev/null >/dev/null 2>" + err_file;
+    const int status = std::system(cmd.c_str());
+    std::ifstream ef(err_file);
+    const std::string err((std::istreambuf_iterator<char>(ef)), std::istreambuf_iterator<char>());
+    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status), err);
+  };
+  const std::string fifo = (dir / "out.csv").string();
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
+      {base + " " + nan, {nan + ": row 2 (room / primary / bvh_single): mrays_samples: 'nan'"}},
+      {base + " " + slow + " --alpha nan", {"--alpha nan"}},
+      {base + " " + slow + " --min-effect nan", {"--min-effect nan"}},
+      {base + " " + slow + " --fail-on-regression nan", {"--fail-on-regression nan"}},
+      {base + " " + other + " --fail-on-regression 5", {"share no cell"}},
+      {base + " " + base + " --csv " + fifo, {fifo + ": is a FIFO"}},
+  };
+  for (const auto& [args, needles] : cases) {
+    SCOPED_TRACE(args);
+    const auto [code, out] = travbench(args);
+    EXPECT_EQ(code, 2) << out;
+    EXPECT_EQ(out.rfind("travbench: error: ", 0), 0u) << out;
+    EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << out;
+    for (const auto& n : needles) EXPECT_NE(out.find(n), std::string::npos) << "'" << n << "' in: " << out;
+  }
+  struct stat st;
+  ASSERT_EQ(stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced";
+  EXPECT_EQ(travbench(base + " " + slow + " --fail-on-regression 10").first, 3) << "a real regression still fails";
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

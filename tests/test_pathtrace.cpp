@@ -10,6 +10,7 @@
 #include "harness/pathtrace.h"
 #include "harness/tables.h"
 #include "structures/builtin_scenes.h"
+#include "test_pathtrace_util.h"
 #include "test_util.h"
 #include "traversal/registry.h"
 
@@ -244,13 +245,8 @@ TEST(PathTrace, BadInputIsAnError) {
 // and invalidated when the converged spp changes.
 TEST(PathTrace, TableWritesRowsImagesAndReusesTheConvergedCache) {
   const auto dir = test::temp_dir("pathtrace_table");
-  TableOptions opt;
-  opt.scene = "room";
-  opt.run.schemes = {"bvh_single"};
-  opt.run.width = opt.run.height = 16;
-  opt.run.progress = false;
-  opt.run.scheme_config.params = {{"min_spp", "2"}, {"max_spp", "4"}, {"ref_spp", "8"}, {"seeds", "2"}};
-  opt.csv = (dir / "pt.csv").string();
+  TableOptions opt = test::small_pathtrace_table(
+      (dir / "pt.csv").string(), {{"min_spp", "2"}, {"max_spp", "4"}, {"ref_spp", "8"}, {"seeds", "2"}});
   ASSERT_EQ(run_table("pathtrace", opt), 0);
   std::ifstream csv(opt.csv);
   std::string line;
