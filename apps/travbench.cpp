@@ -3,15 +3,17 @@
 // Every option value is checked while parsing (CLI11 validators), so a bad value fails at once, before
 // any scene is built, with one line that names the option: "travbench: error: --workloads: ...".
 // Problems found later (a scene file that does not load, a ray file that is cut short) are one line
-// too, "travbench: error: <file>: <what>". Exit status: 0 on success, 2 for bad input (CLI11 parse
-// errors keep their own non-zero codes), 1 for anything else; never a signal.
+// too, "travbench: error: <file>: <what>". Exit status: 0 on success, 2 for bad input (CLI11's
+// parse errors included), 1 for anything else; never a signal.
 #include <CLI/CLI.hpp>
 
+#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <iostream>
+#include <limits>
 #include <new>
 #include <sstream>
 
@@ -20,10 +22,12 @@
 #include "harness/experiment.h"
 #include "harness/image.h"
 #include "harness/pathtrace.h"
+#include "harness/records.h"
 #include "harness/sweep.h"
 #include "harness/tables.h"
 #include "harness/trace_runner.h"
 #include "structures/builtin_scenes.h"
+#include "structures/scene_loader.h"
 #include "traversal/kernels.h"
 #include "traversal/registry.h"
 #include "workloads/ray_file.h"
@@ -68,14 +72,43 @@ void print_params(const std::string& scheme) {
   }
 }
 
-// Parses repeated --param key=value options into the scheme config.
+// Parses repeated --param key=value options into the scheme config; a key given twice is refused
+// (the last value would silently win).
 void apply_params(SchemeConfig& cfg, const std::vector<std::string>& params, const std::string& kernel) {
   cfg.kernel = parse_kernel(kernel);
   for (const auto& p : params) {
     const auto eq = p.find('=');
     if (eq == std::string::npos || eq == 0) throw InputError("--param '" + p + "' is not key=value");
-    cfg.params[p.substr(0, eq)] = p.substr(eq + 1);
+    if (!cfg.params.emplace(p.substr(0, eq), p.substr(eq + 1)).second)
+      throw InputError("--param: parameter '" + p.substr(0, eq) + "' is given twice");
   }
+}
+
+// Every file a command reads and writes, checked together before any work: each output must be
+// writable as a file (the sidecar of a --csv too), and none may be an input or another output.
+void check_files(const std::vector<FileArg>& inputs, const std::vector<FileArg>& outputs) {
+  for (const FileArg& o : outputs) {
+    try {
+      if (!o.path.empty()) check_output_file(o.path);
+    } catch (const InputError& e) {
+      throw InputError(o.what + ": " + e.what());
+    }
+  }
+  check_distinct_files(inputs, outputs);
+}
+
+// The files loading a --scene argument reads (none for a built-in scene).
+std::vector<FileArg> scene_inputs(const std::string& scene_arg) {
+  std::vector<FileArg> in;
+  if (const std::string file = scene_file_of(scene_arg); !file.empty())
+    for (const std::string& f : scene_file_inputs(file)) in.push_back({f == file ? "--scene" : "the scene's views file", f});
+  return in;
+}
+
+// A --csv output and its provenance sidecar.
+std::vector<FileArg> csv_outputs(const std::string& csv) {
+  if (csv.empty()) return {};
+  return {{"--csv", csv}, {"the sidecar of --csv", sidecar_path(csv)}};
 }
 
 // ---- validators: each runs the parser the value is meant for, so the CLI and the library can
@@ -107,7 +140,8 @@ const CLI::Validator kWorkloads = checked_by("WORKLOAD[,WORKLOAD...]", [](const 
 });
 const CLI::Validator kWorkload = checked_by("WORKLOAD", [](const std::string& v) { parse_workload(v); });
 const CLI::Validator kSchemes = checked_by("SCHEME[,SCHEME...]|all", [](const std::string& v) { expand_scheme_list(v); });
-const CLI::Validator kScheme = checked_by("SCHEME", [](const std::string& v) { find_scheme(v); });
+// A scheme entry, NAME[:KEY=VALUE...]: the name and the entry's own parameters (config_for).
+const CLI::Validator kScheme = checked_by("SCHEME", [](const std::string& v) { config_for(v, {}); });
 const CLI::Validator kKernel = checked_by("KERNEL", [](const std::string& v) { parse_kernel(v); });
 const CLI::Validator kParam = checked_by("KEY=VALUE", [](const std::string& v) {
   const auto eq = v.find('=');
@@ -117,24 +151,21 @@ const CLI::Validator kCacheConfig = checked_by("LEVELS", [](const std::string& v
   cachesim::validate_config(cachesim::parse_config(v));
 });
 const CLI::Validator kPolicy = checked_by("POLICY", [](const std::string& v) { cachesim::parse_policy(v); });
+// A seed is a uint64_t: a larger number must not be clamped to 2^64-1 by the conversion.
 const CLI::Validator kSeed = checked_by("UINT", [](const std::string& v) {
   if (v.empty() || v.find_first_not_of("0123456789") != std::string::npos)
     throw InputError("'" + v + "' is not a non-negative integer");
+  uint64_t seed = 0;
+  if (std::from_chars(v.data(), v.data() + v.size(), seed).ec != std::errc())
+    throw InputError("'" + v + "' is out of range (at most " +
+                     std::to_string(std::numeric_limits<uint64_t>::max()) + ")");
 });
-const CLI::Validator kScene = checked_by("SCENE", [](const std::string& v) {
-  if (v.empty()) throw InputError("empty scene name");
-});
-// An output file: its directory must exist and the path must not be a directory, so that a typo
-// fails before a long run rather than when its results are written.
-const CLI::Validator kOutputFile = checked_by("FILE", [](const std::string& v) {
-  namespace fs = std::filesystem;
-  if (v.empty()) throw InputError("empty file name");
-  std::error_code ec;
-  if (fs::is_directory(v, ec)) throw InputError("'" + v + "' is a directory, not a file");
-  const fs::path parent = fs::path(v).parent_path();
-  if (!parent.empty() && !fs::is_directory(parent, ec))
-    throw InputError("directory '" + parent.string() + "' of '" + v + "' does not exist");
-});
+// A scene: the name is valid and a scene file exists and is readable, before any work (its
+// contents are read when it loads).
+const CLI::Validator kScene = checked_by("SCENE", [](const std::string& v) { check_scene_arg(v); });
+// An output file (records.h check_output_file: the rule write_file_durably applies too), so that
+// a typo fails before a long run rather than when its results are written.
+const CLI::Validator kOutputFile = checked_by("FILE", [](const std::string& v) { check_output_file(v); });
 
 }  // namespace
 
@@ -142,7 +173,11 @@ int main(int argc, char** argv) {
   CLI::App app{"travbench: ray-traversal benchmark suite (Bikker 2012 experiments)"};
   app.require_subcommand(1);
   app.failure_message([](const CLI::App*, const CLI::Error& e) {
-    return "travbench: error: " + one_line(e.what()) + " (see travbench --help)\n";
+    std::string what = one_line(e.what());
+    // Some CLI11 messages already end in "Run with --help for more information.": one hint is enough.
+    for (const std::string hint : {"Run with --help for more information.", "(see travbench --help)"})
+      if (const size_t at = what.find(hint); at != std::string::npos) what = one_line(what.erase(at, hint.size()));
+    return "travbench: error: " + what + " (see travbench --help)\n";
   });
 
   std::string list_what, list_scheme;
@@ -277,7 +312,9 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every usage error exits 2, whichever CLI11 code it carries
+    // (105 for a value a validator refused, 106 for a missing option, ...).
+    return app.exit(e) == 0 ? 0 : 2;
   }
 
   try {
@@ -291,6 +328,18 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*cachesim) return cachesim::run_cachesim_command(cache_config, policy, trace_path, std::cout);
+    // Outputs that would destroy an input or each other, and sidecars that cannot be written, are
+    // refused before any work.
+    if (*compare) check_files({{"base", base_csv}, {"new", new_csv}}, csv_outputs(compare_csv));
+    if (*run || *table) check_files(scene_inputs(scene_arg), csv_outputs(csv_path));
+    if (*rays) check_files(scene_inputs(scene_arg), {{"--out", rays_out}});
+    if (*image) check_files(scene_inputs(scene_arg), {{"--out", io.out}});
+    if (*trace) {
+      std::vector<FileArg> in = scene_inputs(scene_arg), out = csv_outputs(csv_path);
+      in.push_back({"--rays", rays_in});
+      out.insert(out.begin(), {"--hits", hits_out});
+      check_files(in, out);
+    }
     if (*compare) {
       const CompareResult r = compare_runs(read_csv(base_csv), read_csv(new_csv), co);
       print_comparison(r, co, stdout);
@@ -319,6 +368,8 @@ int main(int argc, char** argv) {
       to.csv = csv_path;
       to.width_given = table->count("--width") > 0, to.height_given = table->count("--height") > 0;
       to.resume = resume;
+      for (const CLI::Option* o : table->get_options())
+        if (o->count() > 0) to.given.push_back(o->get_name());
       return run_table(table_name, to);
     }
     Scene scene;

@@ -35,6 +35,20 @@ std::vector<std::string> columns_of(const std::vector<Record>& records);  // fir
 std::string csv_line(const std::vector<std::string>& cols, const Record* r);  // nullptr: the header
 std::string sidecar_path(const std::string& csv_path);                     // x.csv -> x.json
 void write_file_durably(const std::string& path, const std::string& text);  // temporary + fsync + rename
+
+// Output paths: one rule for every command, checked while parsing (apps) and again by
+// write_file_durably. A symlink is written through: the file it points to is the output.
+std::string output_target(const std::string& path);  // `path`, or the end of its symlink chain
+// InputError unless `path` can be written as a file: not empty, its directory exists, and it is
+// absent or a regular file (a directory, device, FIFO or socket is refused, never replaced).
+void check_output_file(const std::string& path);
+// A file argument of a command, for messages: what it is ("--csv", "the sidecar of --csv") and its path.
+struct FileArg {
+  std::string what, path;
+};
+// InputError when an output is the same file as an input or as an earlier output (empty paths
+// are skipped): writing it would destroy the input, or keep only one of the two outputs.
+void check_distinct_files(const std::vector<FileArg>& inputs, const std::vector<FileArg>& outputs);
 void write_sidecar(const std::string& csv_path, const nlohmann::json& meta);
 // Prints records as an aligned text table (the terminal view of a CSV).
 void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out);

@@ -43,7 +43,8 @@ int bounce_table(const TableOptions& opt) {
   const std::vector<std::string> workloads = {"primary", "bounce:1", "bounce:2", "bounce:3"};
   const std::vector<std::string> names =
       default_schemes(opt, {"mbvh4_single", "bvh_partition", "bvh_ranged", "mbvh_rs", "mbvh8_single", "embree_single",
-                            "embree_stream"});
+                            "embree_stream"},
+                      {}, OwnTriangleTest::keep);
   // The thesis' values after every option is validated: a refused option says only why.
   const ThesisTable t7 = load_thesis_table("table07_schemes_by_bounce.csv");
   const ThesisRaysPerNode thesis_rays;
@@ -55,8 +56,7 @@ int bounce_table(const TableOptions& opt) {
     // (an entry's own parameters override the layout's: thesis_layout fills only absent keys).
     const SchemeInfo& info = find_scheme(name);
     const std::string& scheme = info.name;
-    SchemeConfig cfg = config_for(name, opt.run.scheme_config);
-    if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
+    SchemeConfig cfg = table_scheme_config(name, opt.run.scheme_config, OwnTriangleTest::keep);  // Embree: its own test
     const std::string layout = thesis_layout(scheme, cfg);
     auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());

@@ -66,7 +66,7 @@ int raygrid_table(const TableOptions& opt) {
   const std::string tscene = thesis_scene(bench.scene().name);
   // The table's own parameter; the others are the schemes'.
   const ParamSpec sweep_param = bool_param("sweep", false, "also run the queue-size sweep of thesis 5.3.5 on bounce:3");
-  const std::vector<std::string> names = default_schemes(opt, {"mbvh4_single", "mbvh_rs", "raygrid"}, {sweep_param});
+  const std::vector<std::string> names = default_schemes(opt, {"mbvh4_single", "mbvh_rs", "raygrid"}, {sweep_param}, OwnTriangleTest::keep);
   SchemeConfig base = opt.run.scheme_config;
   const bool sweep = param_to_bool(base.params.count("sweep") ? base.params.at("sweep") : sweep_param.fallback);
   base.params.erase("sweep");
@@ -85,8 +85,7 @@ int raygrid_table(const TableOptions& opt) {
     // scheme it names picks the thesis' layout and rows.
     const SchemeInfo& info = find_scheme(name);
     const std::string& scheme = info.name;
-    SchemeConfig cfg = config_for(name, base);
-    if (!info.kernels) cfg.kernel = TriKernel::watertight;  // Embree has its own triangle test
+    SchemeConfig cfg = table_scheme_config(name, base, OwnTriangleTest::keep);  // Embree: its own test
     const std::string layout = thesis_layout(scheme, cfg);
     auto t = make_scheme(name, cfg);
     t->prepare(bench.scene(), bench.cache());

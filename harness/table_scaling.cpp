@@ -13,11 +13,12 @@ int scaling_table(const TableOptions& opt) {
   std::vector<std::string> scenes = {"spheres:100000", "spheres:300000", "spheres:1000000", "spheres:3000000",
                                      "spheres:10000000"};
   if (!opt.scene.empty()) scenes = {opt.scene};
+  const std::vector<std::string> names = default_schemes(opt);  // checked before the first scene
   std::vector<Record> records;
   for (const auto& scene_name : scenes) {
     Bench bench(load_scene(scene_name));
     const WorkloadSpec spec = table_spec(opt, "bounce:2");
-    for (const auto& name : default_schemes(opt)) {
+    for (const auto& name : names) {
       auto t = make_scheme(name, config_for(name, opt.run.scheme_config));
       t->prepare(bench.scene(), bench.cache());
       Record r = measure_cell(bench, spec, *t, opt.run, name);

@@ -102,6 +102,7 @@ int simt_table(const TableOptions& opt) {
       Record r;
       r.set("scene", bench.scene().name).set("table", row.table).set("row", row.name).set("workload", spec.name());
       r.set("loop", loop).set("refill", resolved.get_choice("refill")).set("lanes", row.lanes).set("rays", uint64_t(batch.size()));
+      r.set("kernel", std::string(kernel_name(resolved.kernel)));  // --kernel: the lanes' triangle test
       r.set("simt_efficiency", fixed(m.warp.efficiency(), 4));
       r.set("active_lanes_per_step", fixed(steps ? double(m.warp.lane_steps[0] + m.warp.lane_steps[1]) / double(steps) : 0, 2));
       r.set("steps_per_ray", fixed(double(steps) / rays, 3));

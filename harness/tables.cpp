@@ -12,7 +12,7 @@
 
 namespace tb {
 
-#define TB_TABLE(name, fn) int fn(const TableOptions&);
+#define TB_TABLE(name, fn, not_taken, why) int fn(const TableOptions&);
 #include "harness/tables.def"
 #undef TB_TABLE
 
@@ -36,10 +36,19 @@ std::vector<std::string> table_schemes(const TableOptions& opt, const std::vecto
 }  // namespace
 
 std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback,
-                                         const ParamSpecs& table_params) {
+                                         const ParamSpecs& table_params, OwnTriangleTest own) {
   std::vector<std::string> names = table_schemes(opt, fallback);
   check_run_params(names, opt.run.scheme_config, table_params);
+  // Every scheme's configuration as its cells will make it (--kernel included), before the first
+  // cell: a table must not run for an hour and then refuse its last scheme.
+  for (const auto& name : names) resolve_config(name, table_scheme_config(name, opt.run.scheme_config, own));
   return names;
+}
+
+SchemeConfig table_scheme_config(const std::string& entry, const SchemeConfig& run_cfg, OwnTriangleTest own) {
+  SchemeConfig cfg = config_for(entry, run_cfg);
+  if (own == OwnTriangleTest::keep && !find_scheme(entry).kernels) cfg.kernel = TriKernel::watertight;
+  return cfg;
 }
 
 std::string thesis_layout(const std::string& scheme, SchemeConfig& cfg) {
@@ -141,9 +150,15 @@ int accuracy_table(const TableOptions& opt) {
 
 namespace {
 
-const std::map<std::string, std::function<int(const TableOptions&)>>& registry() {
-  static const std::map<std::string, std::function<int(const TableOptions&)>> tables = {
-#define TB_TABLE(name, fn) {#name, fn},
+struct TableEntry {
+  std::function<int(const TableOptions&)> fn;
+  std::string not_taken;  // options it has no use for, space-separated (tables.def)
+  std::string why;
+};
+
+const std::map<std::string, TableEntry>& registry() {
+  static const std::map<std::string, TableEntry> tables = {
+#define TB_TABLE(name, fn, not_taken, why) {#name, {fn, not_taken, why}},
 #include "harness/tables.def"
 #undef TB_TABLE
   };
@@ -154,7 +169,7 @@ const std::map<std::string, std::function<int(const TableOptions&)>>& registry()
 
 std::vector<std::string> table_names() {
   std::vector<std::string> names;
-  for (const auto& [name, fn] : registry()) names.push_back(name);
+  for (const auto& [name, entry] : registry()) names.push_back(name);
   return names;
 }
 
@@ -165,7 +180,11 @@ int run_table(const std::string& name, const TableOptions& opt) {
     for (const auto& n : table_names()) known += " " + n;
     throw InputError("unknown table '" + name + "' (available:" + known + ")");
   }
-  if (opt.csv.empty()) return it->second(opt);
+  const TableEntry& table = it->second;
+  for (const auto& o : opt.given)
+    if ((" " + table.not_taken + " ").find(" " + o + " ") != std::string::npos)
+      throw InputError("table " + name + " does not take " + o + " (" + table.why + ")");
+  if (opt.csv.empty()) return table.fn(opt);
   // Tables whose rows are not measure_cell's cells: build times structure builds, simt runs the
   // warp model; nothing of theirs reaches the CSV before the end, so there is nothing to resume.
   if (opt.resume && (name == "build" || name == "simt"))
@@ -200,7 +219,7 @@ int run_table(const std::string& name, const TableOptions& opt) {
     std::fprintf(stderr, "%s: resuming, %zu cells there already\n", opt.csv.c_str(), cells.resumed());
   TableOptions streamed = opt;
   streamed.run.cells = &cells;
-  const int rc = it->second(streamed);
+  const int rc = table.fn(streamed);
   cells.finish_table();
   return rc;
 }

@@ -18,16 +18,28 @@ struct TableOptions {
   // Keep the cells an interrupted table of the same settings streamed into `csv` and measure only
   // the rest (harness/sweep.h); refused for the tables that do not stream cells (build, simt).
   bool resume = false;
+  // The options given on the command line ("--threads", ...): run_table refuses those the table
+  // has no use for (tables.def) rather than ignore them.
+  std::vector<std::string> given;
 };
 
 std::vector<std::string> table_names();
 
 // What the table functions (harness/table_*.cpp) share.
+// How a table runs a scheme with its own triangle test (cwbvh_single, treelet_queue, Embree) when
+// --kernel names another: `refuse` it (before the first cell), or `keep` its own test (the tables
+// whose Embree rows are anchors beside the kernel under test).
+enum class OwnTriangleTest { refuse, keep };
 // The schemes a table measures: --schemes when given, else `fallback` (those registered), else all.
-// Checks --param against them (check_run_params) and `table_params`, the table's own parameters;
-// each scheme is then made with config_for(name, ...), so it sees only the keys it declares.
+// Checks --param against them (check_run_params) and `table_params`, the table's own parameters,
+// and every scheme's whole configuration (table_scheme_config, --kernel included) before the table
+// measures anything; each scheme is then made with config_for(name, ...), so it sees only the keys
+// it declares.
 std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback = {},
-                                         const ParamSpecs& table_params = {});
+                                         const ParamSpecs& table_params = {},
+                                         OwnTriangleTest own = OwnTriangleTest::refuse);
+// The configuration a table's cell makes scheme `entry` with: config_for, and the kernel rule above.
+SchemeConfig table_scheme_config(const std::string& entry, const SchemeConfig& run_cfg, OwnTriangleTest own);
 // The scene a table runs on: --scene, else the built-in room.
 std::string table_scene(const TableOptions& opt);
 // The sidecar fields of a table compared with the thesis: the command, the scene asked for, the

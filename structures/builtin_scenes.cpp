@@ -196,37 +196,83 @@ bool is_builtin_scene(const std::string& name) {
   return name == "room" || name == "stadium" || name == "sphere" || name.rfind("spheres:", 0) == 0;
 }
 
+namespace {
+
+// N of "spheres:N"; InputError unless it is an integer in range.
+unsigned long long spheres_count(const std::string& name) {
+  const std::string arg = name.substr(8);
+  char* end = nullptr;
+  const unsigned long long n = std::strtoull(arg.c_str(), &end, 10);
+  if (arg.empty() || *end != '\0' || n < 1 || n > 50'000'000ull)
+    throw InputError("scene '" + name + "': N must be an integer in [1, 50000000]");
+  return n;
+}
+
+// InputError unless `name` is a built-in scene name (spheres:N with N in range).
+void check_builtin_name(const std::string& name) {
+  if (name.rfind("spheres:", 0) == 0) spheres_count(name);
+  else if (!is_builtin_scene(name))
+    throw InputError("unknown scene '" + name + "' (built-in: room, stadium, spheres:N, sphere; or a path to a "
+                     ".gltf/.glb/.obj/.ply/.off/.stl file)");
+}
+
+// "S@dx,dy,dz" -> S, with the offset in `off` when given; InputError on a malformed offset.
+std::string strip_offset(const std::string& arg, Vec3* off = nullptr) {
+  const auto at = arg.rfind('@');
+  if (at == std::string::npos) return arg;
+  Vec3 o;
+  int used = 0;
+  const std::string spec = arg.substr(at + 1);  // all of it: trailing text was ignored
+  if (std::sscanf(spec.c_str(), "%f,%f,%f%n", &o.x, &o.y, &o.z, &used) != 3 || size_t(used) != spec.size() ||
+      !is_finite(o) || !in_coord_range(o))
+    throw InputError("scene '" + arg + "': expected NAME@dx,dy,dz for a translated scene (|d| <= 2^56)");
+  if (off) *off = o;
+  return arg.substr(0, at);
+}
+
+// Every offset of "S@a,b,c@d,e,f" (load_scene applies them from the last), each checked -> S.
+std::string strip_offsets(const std::string& arg) {
+  std::string base = arg;
+  for (std::string next = strip_offset(base); next != base; next = strip_offset(base)) base = next;
+  return base;
+}
+
+// A scene argument without its offsets names a built-in scene: a built-in name, or any bare word
+// (no '.', no '/'), which is then reported as an unknown scene name rather than a missing file.
+bool names_builtin(const std::string& name) {
+  return is_builtin_scene(name) || (name.find('.') == std::string::npos && name.find('/') == std::string::npos);
+}
+
+}  // namespace
+
 Scene make_builtin_scene(const std::string& name) {
+  check_builtin_name(name);
   Scene s;
   if (name == "room") s = room();
   else if (name == "stadium") s = stadium();
   else if (name == "sphere") s = sphere();
-  else if (name.rfind("spheres:", 0) == 0) {
-    const std::string arg = name.substr(8);
-    char* end = nullptr;
-    const unsigned long long n = std::strtoull(arg.c_str(), &end, 10);
-    if (arg.empty() || *end != '\0' || n < 1 || n > 50'000'000ull)
-      throw InputError("scene '" + name + "': N must be an integer in [1, 50000000]");
-    s = spheres(n);
-  } else {
-    throw InputError("unknown scene '" + name + "' (built-in: room, stadium, spheres:N, sphere; or a path to a "
-                     ".gltf/.glb/.obj/.ply/.off/.stl file)");
-  }
+  else s = spheres(spheres_count(name));
   s.validate();
   return s;
 }
 
+std::string scene_file_of(const std::string& arg) {
+  const std::string base = strip_offsets(arg);
+  return names_builtin(base) ? std::string() : base;
+}
+
+void check_scene_arg(const std::string& arg) {
+  if (arg.empty()) throw InputError("empty scene name");
+  const std::string base = strip_offsets(arg);
+  if (names_builtin(base)) check_builtin_name(base);
+  else check_scene_file(base);
+}
+
 Scene load_scene(const std::string& arg) {
   // "S@dx,dy,dz": scene S translated by (dx, dy, dz), the huge-offset hard case.
-  const auto at = arg.rfind('@');
-  if (at != std::string::npos) {
-    Vec3 off;
-    int used = 0;
-    const std::string spec = arg.substr(at + 1);
-    if (std::sscanf(spec.c_str(), "%f,%f,%f%n", &off.x, &off.y, &off.z, &used) != 3 || size_t(used) != spec.size() ||
-        !is_finite(off) || !in_coord_range(off))
-      throw InputError("scene '" + arg + "': expected NAME@dx,dy,dz for a translated scene (|d| <= 2^56)");
-    Scene s = load_scene(arg.substr(0, at));
+  Vec3 off;
+  if (const std::string base = strip_offset(arg, &off); base != arg) {
+    Scene s = load_scene(base);
     // A translation so far that float spacing collapses every triangle to zero area traces an
     // empty scene, not the one named: refused rather than reported as misses. (Some collapsed
     // triangles are the point of the huge-offset hard case, sphere@1483760,...: kept.)
@@ -239,15 +285,11 @@ Scene load_scene(const std::string& arg) {
     if (had_area > 0 && keeps_area == 0)
       throw InputError("scene '" + arg + "': the translation collapses all " + std::to_string(had_area) +
                        " triangles to zero area in float (offset too large for the scene's size)");
-    s.name += "@" + arg.substr(at + 1);
+    s.name += arg.substr(base.size());
     s.validate();
     return s;
   }
-  const std::string& name_or_path = arg;
-  if (is_builtin_scene(name_or_path)) return make_builtin_scene(name_or_path);
-  if (name_or_path.find('.') == std::string::npos && name_or_path.find('/') == std::string::npos)
-    return make_builtin_scene(name_or_path);  // an unknown bare name: report it as a scene name
-  return load_scene_file(name_or_path);
+  return names_builtin(arg) ? make_builtin_scene(arg) : load_scene_file(arg);
 }
 
 }  // namespace tb

@@ -17,6 +17,12 @@ Scene make_builtin_scene(const std::string& name);  // throws InputError on unkn
 // Resolves a scene argument: a built-in name or a path to a scene file, optionally followed by
 // @dx,dy,dz to translate it (the huge-offset hard case, e.g. sphere@148376,1234,-223423).
 Scene load_scene(const std::string& name_or_path);
+// What load_scene would refuse without building or reading a scene: a malformed name, offset or
+// spheres:N, an unknown built-in name, a scene file that is missing, not a readable regular file or
+// of an unknown format (check_scene_file). Commands call it while parsing, before any work.
+void check_scene_arg(const std::string& name_or_path);
+// The scene file a scene argument names, its @dx,dy,dz offsets removed; "" for a built-in scene.
+std::string scene_file_of(const std::string& name_or_path);
 
 // Closed-mesh builders, used by the built-in scenes and by tests.
 struct MeshBuilder {

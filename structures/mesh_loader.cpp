@@ -46,15 +46,26 @@ using detail::error_line;
 
 inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
-// Splits [p, end) into lines; '\r' before '\n' is blank-stripped by the tokenizer.
+// Splits [p, end) into lines; '\r' before '\n' is blank-stripped by the tokenizer. With
+// `lone_cr`, a '\r' not followed by '\n' ends a line too (classic Mac OS line ends, which some OBJ
+// exporters still write; read as one line, such a file would have no faces). Off for the formats
+// whose header parsing also locates binary data (PLY), where a CR must not end the header.
 struct LineReader {
   const char* p;
   const char* end;
+  bool lone_cr = false;
   size_t line = 0;
+  const char* newline = nullptr;  // the next '\n' at or after p (end: none), kept across lines
   bool next(std::string_view& out) {
     if (p >= end) return false;
-    const char* eol = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(end - p)));
-    if (!eol) eol = end;
+    if (!newline || newline < p) {  // memchr once per '\n', not once per line: a CR-only file has none
+      newline = static_cast<const char*>(std::memchr(p, '\n', static_cast<size_t>(end - p)));
+      if (!newline) newline = end;
+    }
+    const char* eol = newline;
+    if (lone_cr)  // a '\r' right before the '\n' is a CRLF line end, left to the tokenizer
+      if (const char* cr = static_cast<const char*>(std::memchr(p, '\r', static_cast<size_t>(eol - p))); cr && cr + 1 < eol)
+        eol = cr;
     out = std::string_view(p, static_cast<size_t>(eol - p));
     p = eol < end ? eol + 1 : end;
     ++line;
@@ -147,7 +158,7 @@ Scene parse_obj(const std::string& path, const std::string& data) {
   s.positions.reserve(data.size() / 64);
   s.triangles.reserve(data.size() / 64);
 
-  LineReader lines{data.data(), data.data() + data.size()};
+  LineReader lines{data.data(), data.data() + data.size(), /*lone_cr=*/true};
   std::string_view line, tok;
   std::vector<uint32_t> face;
   long long max_index = -1;  // largest 0-based index seen, checked once all vertices are known

@@ -161,8 +161,25 @@ std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
   return {};
 }
 
-Scene load_scene_file(const std::string& path) {
+void check_scene_file(const std::string& path) {
   detail::check_regular_file(path);
+  if (has_scene_file_extension(path)) return;
+  const std::string ext = lower_extension(path);
+  throw InputError(detail::error_line(
+      path, (ext.empty() ? std::string("file has no extension") : "unknown scene file extension '" + ext + "'") +
+                " (expected .gltf, .glb, .obj, .ply, .off or .stl)"));
+}
+
+std::vector<std::string> scene_file_inputs(const std::string& path) {
+  std::vector<std::string> files = {path};
+  const fs::path json = fs::path(path).parent_path() / "scenes.json";
+  std::error_code ec;
+  if (fs::is_regular_file(json, ec)) files.push_back(json.string());
+  return files;
+}
+
+Scene load_scene_file(const std::string& path) {
+  check_scene_file(path);
   const std::string ext = lower_extension(path);
   Scene s;
   if (ext == ".gltf" || ext == ".glb")
@@ -173,12 +190,8 @@ Scene load_scene_file(const std::string& path) {
     s = load_off(path);
   else if (ext == ".stl")
     s = load_stl(path);
-  else if (ext == ".ply")
-    s = load_ply(path);
   else
-    throw InputError(detail::error_line(
-        path, (ext.empty() ? std::string("file has no extension") : "unknown scene file extension '" + ext + "'") +
-                  " (expected .gltf, .glb, .obj, .ply, .off or .stl)"));
+    s = load_ply(path);
   s.name = detail::file_stem(path);
   s.flush_denormals();
   try {

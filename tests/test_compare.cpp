@@ -365,7 +365,7 @@ TEST(Compare, CsvOutputThatIsNotARegularFileIsAnError) {
     write_csv(fifo, {r});
     ADD_FAILURE() << "no error for a FIFO";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find(fifo + ": is a FIFO"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("'" + fifo + "' is a FIFO"), std::string::npos) << e.what();
   }
   struct stat st;
   ASSERT_EQ(stat(fifo.c_str(), &st), 0);
@@ -405,7 +405,7 @@ TEST(Compare, CommandRefusesBadValuesOptionsAndOutputs) {
       {base + " " + slow + " --min-effect nan", {"--min-effect nan"}},
       {base + " " + slow + " --fail-on-regression nan", {"--fail-on-regression nan"}},
       {base + " " + other + " --fail-on-regression 5", {"share no cell"}},
-      {base + " " + base + " --csv " + fifo, {fifo + ": is a FIFO"}},
+      {base + " " + base + " --csv " + fifo, {"'" + fifo + "' is a FIFO"}},
   };
   for (const auto& [args, needles] : cases) {
     SCOPED_TRACE(args);

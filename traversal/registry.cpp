@@ -107,7 +107,9 @@ SchemeConfig config_for(const std::string& entry, const SchemeConfig& run_cfg) {
   c.kernel = run_cfg.kernel;
   for (const auto& [key, value] : run_cfg.params)
     if (find_param(info.params, key)) c.params[key] = value;
-  // The entry's own parameters (NAME:KEY=VALUE:...), each declared by this scheme, override.
+  // The entry's own parameters (NAME:KEY=VALUE:...), each declared by this scheme, override; each
+  // at most once (a second value would silently win, and the row's params would hide the first).
+  std::set<std::string> own;
   for (size_t at = entry.find(':'); at != std::string::npos;) {
     const size_t end = entry.find(':', at + 1);
     const std::string kv = entry.substr(at + 1, end == std::string::npos ? std::string::npos : end - at - 1);
@@ -117,6 +119,8 @@ SchemeConfig config_for(const std::string& entry, const SchemeConfig& run_cfg) {
     const std::string key = kv.substr(0, eq);
     const ParamSpec* spec = find_param(info.params, key);
     if (!spec) unknown_param(key, names_of(info.params), "scheme " + info.name);
+    if (!own.insert(key).second)
+      throw InputError("scheme entry '" + entry + "': parameter '" + key + "' is given twice");
     spec->check(kv.substr(eq + 1));
     c.params[key] = kv.substr(eq + 1);
     at = end;
