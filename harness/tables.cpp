@@ -104,6 +104,10 @@ std::vector<Variant> variants_of(const SchemeInfo& info, const SchemeConfig& bas
       c.params["robust"] = std::to_string(robust);
       v.push_back({robust ? "embree_robust" : "embree_default", c});
     }
+  } else {
+    // One triangle test of its own (cwbvh_single, treelet_queue: the watertight 8-wide blocks):
+    // one row per cell. Without this branch those schemes had no rows at all.
+    v.push_back({std::string(kernel_name(TriKernel::watertight)), base});
   }
   return v;
 }

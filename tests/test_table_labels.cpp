@@ -90,6 +90,18 @@ TEST(TableLabels, EntriesWithParametersAreRowsOfTheirOwn) {
     }
     EXPECT_EQ(seen, (std::set<std::string>{"mbvh8_single:order=sort", "embree_single"}));
   }
+  {
+    // Schemes with one triangle test of their own have rows too (they had none: no kernel
+    // variants and not Embree's two), labelled with it.
+    const CsvTable t = run_small_table("accuracy", "sphere", {"cwbvh_single", "treelet_queue"}, 16, dir);
+    const int scheme = t.column("scheme"), kernel = t.column("kernel");
+    std::set<std::string> seen;
+    for (size_t i = 0; i < t.rows.size(); ++i) {
+      EXPECT_EQ(t.at(i, kernel), "watertight");
+      seen.insert(t.at(i, scheme));
+    }
+    EXPECT_EQ(seen, (std::set<std::string>{"cwbvh_single", "treelet_queue"}));
+  }
   std::filesystem::remove_all(dir);
 }
 
