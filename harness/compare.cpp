@@ -278,6 +278,7 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
   const Indexed bi = index(base, ids), ni = index(next, ids);
   CompareResult res;
   double log_sum = 0;
+  size_t timed = 0;  // cells with rays on both sides: the ones a speed ratio describes
   for (const auto& key : bi.order) {
     auto it = ni.row.find(key);
     if (it == ni.row.end()) {
@@ -299,6 +300,9 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
       c.p = mann_whitney_p(b, a);
     }
     if (!c.p || c.base_samples < 2 || c.next_samples < 2) c.p.reset();  // too few to test
+    // A cell without rays on either side (`run` writes speed 0 for it) timed nothing: no ratio,
+    // no test, not in the geometric mean (its 0 counted in the mean's denominator only) nor the gate.
+    if (c.base == 0 || c.next == 0) c.p.reset(), c.ratio = 0;
     for (const char* col : kAccuracyColumns) {
       const int bc = base.column(col), nc = next.column(col);
       if (bc < 0 && nc < 0) continue;
@@ -306,7 +310,7 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
       const double nv = nc >= 0 && !next.at(nr, nc).empty() ? accuracy(next, nr, nc, col) : 0;
       c.accuracy_delta.emplace_back(col, nv - bv);
     }
-    if (c.ratio > 0) log_sum += std::log(c.ratio);
+    if (c.ratio > 0) log_sum += std::log(c.ratio), ++timed;
     res.cells.push_back(std::move(c));
   }
   for (const auto& key : ni.order)
@@ -324,10 +328,10 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
                      std::to_string(res.only_next.size()) + " only in new" + first(res.only_next) +
                      "; cells match on " + on);
   }
-  res.geomean_ratio = res.cells.empty() ? 0 : std::exp(log_sum / double(res.cells.size()));
+  res.geomean_ratio = timed == 0 ? 0 : std::exp(log_sum / double(timed));
   std::vector<double> scatter;
   for (const auto& c : res.cells)
-    if (res.geomean_ratio > 0) scatter.push_back(std::fabs(c.ratio / res.geomean_ratio - 1.0) * 100.0);
+    if (res.geomean_ratio > 0 && c.ratio > 0) scatter.push_back(std::fabs(c.ratio / res.geomean_ratio - 1.0) * 100.0);
   if (!scatter.empty()) {
     std::nth_element(scatter.begin(), scatter.begin() + std::ptrdiff_t(scatter.size() / 2), scatter.end());
     res.scatter_pct = scatter[scatter.size() / 2];
@@ -345,6 +349,11 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
   res.min_attainable_p = 1;
   size_t k = 0;
   for (auto& c : res.cells) {
+    if (c.ratio == 0) {
+      c.verdict = "no rays";
+      res.untested++;
+      continue;
+    }
     if (!c.p) {
       c.verdict = "n/a";
       res.untested++;

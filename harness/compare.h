@@ -76,7 +76,7 @@ struct CellComparison {
   std::optional<double> p;               // U-test p-value; nullopt without samples
   std::optional<double> q;               // p adjusted by Benjamini-Hochberg over the tested cells
   size_t base_samples = 0, next_samples = 0;
-  std::string verdict;                   // faster | slower | same | noise | n/a (not tested)
+  std::string verdict;                   // faster | slower | same | noise | n/a (not tested) | no rays
   std::vector<std::pair<std::string, double>> accuracy_delta;  // column -> next - base
   bool regression = false;
 };

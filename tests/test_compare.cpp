@@ -89,6 +89,18 @@ TEST(Compare, MatchesCellsAndGatesRegressions) {
   EXPECT_FALSE(r2.failed);
   EXPECT_EQ(comparison_records(r).size(), 4u);
   EXPECT_THROW(compare_runs(read_csv(write_file("x.csv", "a,b\n1,2\n")), read_csv(base)), InputError);
+  // A cell without rays (bounce:2 of a convex scene: `run` writes 0) is no speed: not in the
+  // geometric mean (it pulled the mean toward 1 through the denominator) and never a regression
+  // (without samples it failed the gate).
+  const std::string rh = "scene,workload,scheme,rays,mrays_median\n";
+  const auto eb = write_file("empty_base.csv", rh + "s,primary,bvh_single,100,10\ns,bounce:2,bvh_single,0,0\n");
+  const auto en = write_file("empty_next.csv", rh + "s,primary,bvh_single,100,8\ns,bounce:2,bvh_single,0,0\n");
+  const CompareResult r3 = compare_runs(read_csv(eb), read_csv(en), opt);
+  ASSERT_EQ(r3.cells.size(), 2u);
+  EXPECT_NEAR(r3.geomean_ratio, 0.8, 1e-12);
+  EXPECT_EQ(r3.cells[1].verdict, "no rays");
+  EXPECT_FALSE(r3.cells[1].regression);
+  EXPECT_TRUE(r3.cells[0].regression);  // 20% slower, no samples: the gate cannot pass it
 }
 
 TEST(Compare, BenjaminiHochbergMatchesRsPAdjust) {
