@@ -203,8 +203,8 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
   // explosion guard below) — gigabytes, then an out-of-memory error that blamed the image size.
   // Nodes likewise: leaf_prims = 1 splits every node of two triangles, and each leaf gets a
   // mini-BVH of its own.
-  const uint64_t ref_budget = std::max<uint64_t>(64ull * n, 1ull << 24);
-  const uint64_t node_budget = std::max<uint64_t>(16ull * n, 1ull << 20);
+  const uint64_t ref_budget = std::max<uint64_t>(64ull * n, 1ull << 20);
+  const uint64_t node_budget = std::max<uint64_t>(16ull * n, 1ull << 16);
   uint64_t refs_made = 0;
   while (!stack.empty()) {
     Work w = std::move(stack.back());
@@ -255,7 +255,7 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
                          std::to_string(p.max_depth) + " makes more than " +
                          (refs_made > ref_budget ? std::to_string(ref_budget) + " triangle references (64"
                                                  : std::to_string(node_budget) + " nodes (16") +
-                         " per triangle of the scene, or 2^20 nodes, 2^24 references if more); raise leaf_prims or "
+                         " per triangle of the scene, or 2^16 nodes, 2^20 references if more); raise leaf_prims or "
                          "lower max_depth");
     }
     if (split) {
