@@ -197,13 +197,13 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
     stack.push_back(std::move(w));
   }
   const float pad = o.pad;
-  // References made by all splits together: a scene's triangles are referenced a few times over
-  // ten levels at the thesis' settings (§5.4.1), but leaf_prims near 1 with a deep max_depth keeps
+  // References made by all splits together: a scene's triangles are referenced a few times per
+  // level over up to ten levels at the thesis' settings (§5.4.1), but leaf_prims near 1 with a deep max_depth keeps
   // splitting nodes that every triangle of a fan overlaps, up to 4x the references per level (the
   // explosion guard below) — gigabytes, then an out-of-memory error that blamed the image size.
   // Nodes likewise: leaf_prims = 1 splits every node of two triangles, and each leaf gets a
   // mini-BVH of its own.
-  const uint64_t ref_budget = std::max<uint64_t>(64ull * n, 1ull << 20);
+  const uint64_t ref_budget = std::max<uint64_t>(256ull * n, 1ull << 24);
   const uint64_t node_budget = std::max<uint64_t>(16ull * n, 1ull << 16);
   uint64_t refs_made = 0;
   while (!stack.empty()) {
@@ -253,9 +253,9 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
       if (split && ((refs_made += total) > ref_budget || o.nodes.size() + 8 > node_budget))
         throw InputError("octree: leaf_prims=" + std::to_string(p.leaf_prims) + " with max_depth=" +
                          std::to_string(p.max_depth) + " makes more than " +
-                         (refs_made > ref_budget ? std::to_string(ref_budget) + " triangle references (64"
+                         (refs_made > ref_budget ? std::to_string(ref_budget) + " triangle references made by its splits (256"
                                                  : std::to_string(node_budget) + " nodes (16") +
-                         " per triangle of the scene, or 2^16 nodes, 2^20 references if more); raise leaf_prims or "
+                         " per triangle of the scene, or 2^16 nodes, 2^24 references if more); raise leaf_prims or "
                          "lower max_depth");
     }
     if (split) {
