@@ -267,20 +267,29 @@ void write_csv(const std::string& path, const std::vector<Record>& records, cons
   write_sidecar(path, meta);
 }
 
+namespace {
+// What a printed table shows in a cell: a speed column of a row that traced no rays (bounce:k of a
+// scene whose rays all escaped before bounce k) says so instead of "0", which reads as a result.
+// The CSV keeps the 0 with the row's `rays` = 0.
+std::string shown_value(const Record& r, const std::string& column) {
+  const std::string* v = r.get(column);
+  if (!v) return "";
+  const std::string* rays = r.get("rays");
+  if (rays && *rays == "0" && column.rfind("mrays", 0) == 0) return "no rays";
+  return *v;
+}
+}  // namespace
+
 void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out) {
   std::vector<size_t> w(columns.size());
   for (size_t i = 0; i < columns.size(); ++i) {
     w[i] = columns[i].size();
-    for (const auto& r : records)
-      if (const std::string* v = r.get(columns[i])) w[i] = std::max(w[i], v->size());
+    for (const auto& r : records) w[i] = std::max(w[i], shown_value(r, columns[i]).size());
   }
   for (size_t i = 0; i < columns.size(); ++i) std::fprintf(out, "%-*s  ", int(w[i]), columns[i].c_str());
   std::fprintf(out, "\n");
   for (const auto& r : records) {
-    for (size_t i = 0; i < columns.size(); ++i) {
-      const std::string* v = r.get(columns[i]);
-      std::fprintf(out, "%-*s  ", int(w[i]), v ? v->c_str() : "");
-    }
+    for (size_t i = 0; i < columns.size(); ++i) std::fprintf(out, "%-*s  ", int(w[i]), shown_value(r, columns[i]).c_str());
     std::fprintf(out, "\n");
   }
 }

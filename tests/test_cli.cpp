@@ -366,6 +366,27 @@ TEST(CLI, InterleavedRunGivesPerRoundRatiosToTheFirstScheme) {
   std::filesystem::remove_all(dir);
 }
 
+// A printed table shows "no rays" for the speed of a row without rays (`table scaling --scene
+// sphere` printed a column of 0 Mrays/s for bounce:2 of a convex scene); the CSV keeps the 0.
+TEST(CLI, PrintedTablesSayNoRaysInsteadOfASpeedOfZero) {
+  Record empty, full;
+  empty.set("scheme", "a").set("rays", 0).set("mrays_median", 0.0).set("mismatch_rate", 0.0);
+  full.set("scheme", "b").set("rays", 10).set("mrays_median", 2.5).set("mismatch_rate", 0.0);
+  char buf[512] = {};
+  FILE* f = fmemopen(buf, sizeof buf - 1, "w");
+  ASSERT_NE(f, nullptr);
+  print_table({empty, full}, {"scheme", "mrays_median", "mismatch_rate"}, f);
+  std::fclose(f);
+  std::vector<std::string> lines;
+  std::stringstream ss(buf);
+  for (std::string l; std::getline(ss, l);) lines.push_back(l);
+  ASSERT_EQ(lines.size(), 3u) << buf;
+  EXPECT_NE(lines[1].find("no rays"), std::string::npos) << lines[1];
+  EXPECT_NE(lines[1].find(" 0 "), std::string::npos) << lines[1];  // mismatch_rate is still a number
+  EXPECT_NE(lines[2].find("2.5"), std::string::npos) << lines[2];
+  EXPECT_EQ(lines[2].find("no rays"), std::string::npos) << lines[2];
+}
+
 // A workload without rays (the sphere is convex: every bounce:1 ray escapes, so bounce:2 has none)
 // has no speed to compare: its interleaved rows say nan in the ratio columns, not the ratio of two
 // traces of nothing (a goal script read such a ratio as 1.6x before).
