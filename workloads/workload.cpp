@@ -281,6 +281,11 @@ RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const C
   } else if (spec.kind.rfind("hard:", 0) == 0) b = hard_case_rays(scene, spec);
   else throw InputError("unknown workload kind '" + spec.kind + "'");
   b.workload = spec.name();
+  // A generated component can be a denormal (a hit point within 1e-38 of a coordinate plane):
+  // read as 0, as every tracing thread would (DAZ), rather than refused by validate below.
+  for (Ray& r : b.rays)
+    for (float* x : {&r.org.x, &r.org.y, &r.org.z, &r.dir.x, &r.dir.y, &r.dir.z, &r.tmin, &r.tmax})
+      if (is_denormal(*x)) *x = 0.f;
   try {
     b.validate();
   } catch (const InputError& e) {  // a generated ray out of range: say which scene and workload made it
