@@ -257,6 +257,9 @@ TEST_F(BadInputCli, TableOptionsATableDoesNotTakeAreRefused) {
   expect_rejected("table build --scene sphere --threads 2" + csv, {"table build", "--threads"});
   expect_rejected("table cache --scene sphere --width 64" + csv, {"table cache", "--width", "512x512"});
   expect_rejected("table accuracy --scene sphere --kernel moller" + csv, {"table accuracy", "--kernel"});
+  // build and cache capped --reps at 5 and 3 without a word: refused above.
+  expect_rejected("table build --scene sphere --reps 6" + csv, {"table build takes --reps 1..5", "not 6"});
+  expect_rejected("table cache --scene sphere --reps 4" + csv, {"table cache takes --reps 1..3", "not 4"});
   EXPECT_FALSE(fs::exists(dir_ / "t.csv"));
   EXPECT_FALSE(fs::exists(dir_ / "t.json"));
   // simt's lanes do run --kernel's triangle test: its rows say which.
