@@ -276,12 +276,15 @@ Scene load_scene(const std::string& arg) {
     // A translation so far that float spacing collapses every triangle to zero area traces an
     // empty scene, not the one named: refused rather than reported as misses. (Some collapsed
     // triangles are the point of the huge-offset hard case, sphere@1483760,...: kept.)
-    size_t had_area = 0, keeps_area = 0;
-    for (uint32_t t = 0; t < s.num_triangles(); ++t)
-      had_area += cross(s.vertex(t, 1) - s.vertex(t, 0), s.vertex(t, 2) - s.vertex(t, 0)) != Vec3{};
+    auto with_area = [&s] {
+      size_t n = 0;
+      for (uint32_t t = 0; t < s.num_triangles(); ++t)
+        n += cross(s.vertex(t, 1) - s.vertex(t, 0), s.vertex(t, 2) - s.vertex(t, 0)) != Vec3{};
+      return n;
+    };
+    const size_t had_area = with_area();
     s.translate(off);
-    for (uint32_t t = 0; t < s.num_triangles(); ++t)
-      keeps_area += cross(s.vertex(t, 1) - s.vertex(t, 0), s.vertex(t, 2) - s.vertex(t, 0)) != Vec3{};
+    const size_t keeps_area = with_area();
     if (had_area > 0 && keeps_area == 0)
       throw InputError("scene '" + arg + "': the translation collapses all " + std::to_string(had_area) +
                        " triangles to zero area in float (offset too large for the scene's size)");

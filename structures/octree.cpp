@@ -198,9 +198,10 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
   }
   const float pad = o.pad;
   // References made by all splits together: a scene's triangles are referenced a few times per
-  // level over up to ten levels at the thesis' settings (§5.4.1), but leaf_prims near 1 with a deep max_depth keeps
-  // splitting nodes that every triangle of a fan overlaps, up to 4x the references per level (the
-  // explosion guard below) — gigabytes, then an out-of-memory error that blamed the image size.
+  // level over up to ten levels at the thesis' settings (§5.4.1), but leaf_prims near 1 with a deep
+  // max_depth keeps splitting nodes that every triangle of a fan overlaps, up to 4x the references
+  // per level (the explosion guard below) — gigabytes, then an out-of-memory error that blamed the
+  // image size.
   // Nodes likewise: leaf_prims = 1 splits every node of two triangles, and each leaf gets a
   // mini-BVH of its own.
   const uint64_t ref_budget = std::max<uint64_t>(256ull * n, 1ull << 24);

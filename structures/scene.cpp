@@ -26,8 +26,7 @@ void Scene::validate() const {
       throw InputError("scene '" + name + "': vertex " + std::to_string(i) + " has a NaN or Inf coordinate");
     // The traceable range (vec3.h, kCoordLimit; the file loaders flush denormals first).
     if (!in_coord_range(positions[i])) {
-      const Vec3 p = positions[i];
-      const bool big = std::max({std::fabs(p.x), std::fabs(p.y), std::fabs(p.z)}) > kCoordLimit;
+      const bool big = max_abs(positions[i]) > kCoordLimit;
       throw InputError("scene '" + name + "': vertex " + std::to_string(i) + " has a " +
                        (big ? "coordinate beyond +-2^56 (7.2e16)" : "denormal coordinate") +
                        ", outside the range travbench traces");
@@ -58,7 +57,7 @@ void Scene::ensure_views() {
   // A scene without extent (every vertex on one point) or far thinner than its distance from the
   // origin would put the eye on the centre in float (a zero view direction): its corners are then
   // placed 2^-12 of the centre's magnitude (or 1) away.
-  const float m = std::max({std::fabs(c.x), std::fabs(c.y), std::fabs(c.z)});
+  const float m = max_abs(c);
   if (std::max({e.x, e.y, e.z}) <= m * 0x1p-20f) {
     const float s = m > 0.f ? m * 0x1p-12f : 1.f;
     e = {s, s, s};

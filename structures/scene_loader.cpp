@@ -88,10 +88,13 @@ Vec3 json_vec3(const nlohmann::json& j, const std::string& json_path, const std:
     v[i] = j[i].get<float>();
   }
   if (!is_finite(v)) throw InputError(detail::error_line(json_path, what + " has a non-finite or out-of-range component"));
-  if (std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}) > kCoordLimit)
+  if (max_abs(v) > kCoordLimit)
     throw InputError(detail::error_line(json_path, what + " has a component beyond +-2^56 (7.2e16), the range travbench traces"));
   return v;
 }
+
+// The views file of a scene file: scenes.json in its directory.
+fs::path scenes_json_of(const std::string& scene_path) { return fs::path(scene_path).parent_path() / "scenes.json"; }
 
 }  // namespace
 
@@ -101,7 +104,7 @@ bool has_scene_file_extension(const std::string& path) {
 }
 
 std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
-  fs::path json_path = fs::path(scene_path).parent_path() / "scenes.json";
+  const fs::path json_path = scenes_json_of(scene_path);
   std::error_code ec;
   if (!fs::is_regular_file(json_path, ec)) return {};
   const std::string jp = json_path.string();
@@ -172,7 +175,7 @@ void check_scene_file(const std::string& path) {
 
 std::vector<std::string> scene_file_inputs(const std::string& path) {
   std::vector<std::string> files = {path};
-  const fs::path json = fs::path(path).parent_path() / "scenes.json";
+  const fs::path json = scenes_json_of(path);
   std::error_code ec;
   if (fs::is_regular_file(json, ec)) files.push_back(json.string());
   return files;

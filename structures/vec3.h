@@ -33,6 +33,7 @@ inline Vec3 normalize(Vec3 a) { return a / length(a); }
 inline Vec3 vmin(Vec3 a, Vec3 b) { return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)}; }
 inline Vec3 vmax(Vec3 a, Vec3 b) { return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)}; }
 inline bool is_finite(Vec3 a) { return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z); }
+inline float max_abs(Vec3 a) { return std::max({std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)}); }
 
 // The coordinates travbench traces: scene vertices and ray origins and directions with |x| <= 2^56
 // (7.2e16), directions whose largest component is >= 2^-56, and no denormal component. Why: the

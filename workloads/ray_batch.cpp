@@ -53,7 +53,7 @@ void RayBatch::validate() const {
         throw InputError("ray " + std::to_string(i) + ": " + kField[k] + " = " + g(c[k]) +
                          " is beyond +-2^56 (7.2e16), the range travbench traces");
     }
-    if (std::max({std::fabs(r.dir.x), std::fabs(r.dir.y), std::fabs(r.dir.z)}) < 1.f / kCoordLimit)
+    if (max_abs(r.dir) < 1.f / kCoordLimit)
       throw InputError("ray " + std::to_string(i) + " has a direction shorter than 2^-56 (1.4e-17) in every component");
   }
 }
