@@ -11,6 +11,7 @@
 #include <limits>
 
 #include "harness/trace_runner.h"
+#include "structures/output_file.h"
 #include "traversal/registry.h"
 
 namespace tb {
@@ -207,8 +208,16 @@ void write_rgb_png(const std::string& path, uint32_t width, uint32_t height, con
   out.width = width;
   out.height = height;
   out.format = PNG_FORMAT_RGB;
-  if (!png_image_write_to_file(&out, path.c_str(), 0, rgb.data(), 0, nullptr))
-    throw InputError(path + ": cannot write PNG (" + std::string(out.message) + ")");
+  // Encoded in memory, then written as every output is (write_file_durably: temporary + rename),
+  // so a failed write leaves the old image, not a cut one. The first call sizes the buffer.
+  png_alloc_size_t bytes = 0;
+  if (!png_image_write_to_memory(&out, nullptr, &bytes, 0, rgb.data(), 0, nullptr))
+    throw InputError(path + ": cannot encode PNG (" + std::string(out.message) + ")");
+  std::string png(bytes, '\0');
+  if (!png_image_write_to_memory(&out, png.data(), &bytes, 0, rgb.data(), 0, nullptr))
+    throw InputError(path + ": cannot encode PNG (" + std::string(out.message) + ")");
+  png.resize(bytes);
+  write_file_durably(path, png);
 }
 
 void run_image(Bench& bench, const ImageOptions& opt, const std::string& scene_label) {

@@ -8,6 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "structures/output_file.h"
+
 namespace tb {
 
 class Record {
@@ -34,14 +36,7 @@ nlohmann::json provenance();
 std::vector<std::string> columns_of(const std::vector<Record>& records);  // first-seen order
 std::string csv_line(const std::vector<std::string>& cols, const Record* r);  // nullptr: the header
 std::string sidecar_path(const std::string& csv_path);                     // x.csv -> x.json
-void write_file_durably(const std::string& path, const std::string& text);  // temporary + fsync + rename
 
-// Output paths: one rule for every command, checked while parsing (apps) and again by
-// write_file_durably. A symlink is written through: the file it points to is the output.
-std::string output_target(const std::string& path);  // `path`, or the end of its symlink chain
-// InputError unless `path` can be written as a file: not empty, its directory exists, and it is
-// absent or a regular file (a directory, device, FIFO or socket is refused, never replaced).
-void check_output_file(const std::string& path);
 // A file argument of a command, for messages: what it is ("--csv", "the sidecar of --csv") and its path.
 struct FileArg {
   std::string what, path;

@@ -5,20 +5,26 @@
 // a parameter given twice, and table options that failed late or were ignored while the sidecar
 // recorded them. Each is refused before any work, in one line, and leaves every file as it was.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <random>
 #include <string>
 
 #include "cli_test.h"
+#include "harness/image.h"
 #include "harness/records.h"
 #include "structures/scene_loader.h"
+#include "workloads/ray_file.h"
 
 namespace fs = std::filesystem;
 
@@ -97,6 +103,45 @@ TEST_F(BadInputCli, DurableWriteRefusesANonRegularTarget) {
   EXPECT_TRUE(is_fifo("fifo"));
   EXPECT_THROW(check_output_file(path("fifo")), InputError);
   EXPECT_NO_THROW(check_output_file(path("new.csv")));
+}
+
+// Ray files, hit files and images are written like the CSVs (temporary + rename): a write that
+// fails part-way (here the file-size limit, as a full disk would) leaves the old file whole and no
+// temporary behind. They were written in place: a cut file with a valid header.
+TEST_F(BadInputCli, AFailedWriteLeavesTheOldRayHitAndImageFiles) {
+  auto batch_of = [](size_t n) {
+    RayBatch b;
+    for (size_t i = 0; i < n; ++i) b.rays.push_back(Ray{{float(i), 0, 0}, 0.f, {0, 0, 1}, 1e30f});
+    b.group_uniform(4);
+    return b;
+  };
+  write_rays(path("r.bin"), batch_of(2));
+  write_hits(path("h.bin"), std::vector<Hit>(2));
+  std::vector<uint8_t> rgb(64 * 64 * 3);
+  std::mt19937 noise(7);
+  for (uint8_t& c : rgb) c = uint8_t(noise());  // incompressible: ~12 KB of PNG
+  write_rgb_png(path("i.png"), 2, 2, std::vector<uint8_t>(12, 200));
+  const std::string rays = read("r.bin"), hits = read("h.bin"), png = read("i.png");
+  ASSERT_LT(std::max({rays.size(), hits.size(), png.size()}), 512u);
+
+  rlimit old{};
+  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old), 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // write() then fails with EFBIG
+  rlimit small = old;
+  small.rlim_cur = 1024;
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &small), 0);
+  EXPECT_THROW(write_rays(path("r.bin"), batch_of(1000)), InputError);
+  EXPECT_THROW(write_hits(path("h.bin"), std::vector<Hit>(1000)), InputError);
+  EXPECT_THROW(write_rgb_png(path("i.png"), 64, 64, rgb), InputError);
+  ::setrlimit(RLIMIT_FSIZE, &old);
+  std::signal(SIGXFSZ, old_handler);
+
+  EXPECT_EQ(read("r.bin"), rays);
+  EXPECT_EQ(read("h.bin"), hits);
+  EXPECT_EQ(read("i.png"), png);
+  EXPECT_EQ(read_rays(path("r.bin")).size(), 2u);
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << e.path() << " left behind";
 }
 
 // A symlink is written through by every command (run appended through it; compare replaced it).

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "structures/output_file.h"
 #include "structures/scene.h"
 
 namespace tb {
@@ -12,11 +13,12 @@ namespace {
 constexpr char kRayMagic[8] = {'T', 'B', 'R', 'A', 'Y', 'S', '1', '\0'};
 constexpr char kHitMagic[8] = {'T', 'B', 'H', 'I', 'T', 'S', '1', '\0'};
 
-std::ofstream open_out(const std::string& path) {
-  std::ofstream f(path, std::ios::binary);
-  if (!f) throw InputError(path + ": cannot open for writing");
-  return f;
-}
+// A file's bytes, built in memory and written by write_file_durably (temporary + rename): a failed
+// or interrupted write never leaves a cut ray or hit file where an older one was.
+struct Bytes {
+  std::string data;
+  void put(const void* p, size_t n) { data.append(static_cast<const char*>(p), n); }
+};
 
 // Opens and sizes a file for reading; rejects directories and unreadable paths.
 std::ifstream open_in(const std::string& path, uint64_t& size) {
@@ -41,7 +43,7 @@ void read_exact(std::ifstream& f, T* data, size_t n, const std::string& path, co
 }  // namespace
 
 void write_rays(const std::string& path, const RayBatch& b) {
-  auto f = open_out(path);
+  Bytes f;
   const uint64_t count = b.rays.size();
   // Uniform = exactly what group_uniform(packet_size) rebuilds on reading, empty packets included
   // (a table like {0, 0} must not come back as {0}).
@@ -49,16 +51,17 @@ void write_rays(const std::string& path, const RayBatch& b) {
   for (uint32_t p = 0; uniform && p < b.num_packets(); ++p)
     uniform &= b.packet_begin[p] == uint64_t(p) * b.packet_size;
   const uint32_t packet_count = uniform ? 0 : b.num_packets();
-  f.write(kRayMagic, 8);
-  f.write(reinterpret_cast<const char*>(&count), 8);
-  f.write(reinterpret_cast<const char*>(&b.packet_size), 4);
-  f.write(reinterpret_cast<const char*>(&packet_count), 4);
+  f.put(kRayMagic, 8);
+  f.put(&count, 8);
+  f.put(&b.packet_size, 4);
+  f.put(&packet_count, 4);
+  f.data.reserve(24 + count * 32 + (packet_count ? (size_t(packet_count) + 1) * 4 : 0));
   for (const Ray& r : b.rays) {
     const float v[8] = {r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z, r.tmin, r.tmax};
-    f.write(reinterpret_cast<const char*>(v), sizeof v);
+    f.put(v, sizeof v);
   }
-  if (packet_count) f.write(reinterpret_cast<const char*>(b.packet_begin.data()), (packet_count + 1) * 4);
-  if (!f) throw InputError(path + ": write failed");
+  if (packet_count) f.put(b.packet_begin.data(), (size_t(packet_count) + 1) * 4);
+  write_file_durably(path, f.data);
 }
 
 RayBatch read_rays(const std::string& path) {
@@ -104,12 +107,13 @@ RayBatch read_rays(const std::string& path) {
 }
 
 void write_hits(const std::string& path, const std::vector<Hit>& hits) {
-  auto f = open_out(path);
+  Bytes f;
   const uint64_t count = hits.size();
-  f.write(kHitMagic, 8);
-  f.write(reinterpret_cast<const char*>(&count), 8);
-  f.write(reinterpret_cast<const char*>(hits.data()), std::streamsize(count * sizeof(Hit)));
-  if (!f) throw InputError(path + ": write failed");
+  f.data.reserve(16 + count * sizeof(Hit));
+  f.put(kHitMagic, 8);
+  f.put(&count, 8);
+  f.put(hits.data(), count * sizeof(Hit));
+  write_file_durably(path, f.data);
 }
 
 std::vector<Hit> read_hits(const std::string& path) {
