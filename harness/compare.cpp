@@ -88,6 +88,14 @@ bool is_speed(const std::string& text, bool no_rays) {
   return v && std::isfinite(*v) && (*v > 0 || (*v == 0 && no_rays));
 }
 
+bool is_accuracy_value(const std::string& text, const std::string& column) {
+  const std::optional<double> v = parse_number(text);
+  return v && std::isfinite(*v) && *v >= 0 && (column != "mismatch_rate" || *v <= 1);
+}
+std::string accuracy_value_kind(const std::string& column) {
+  return column == "mismatch_rate" ? "a rate (a finite number in [0, 1])" : "a count (a finite number >= 0)";
+}
+
 // ---------------------------------------------------------------------------------------------
 // Mann-Whitney U
 
@@ -175,8 +183,6 @@ namespace {
 // Columns that identify a cell when both files carry them (the run, table and trace CSVs).
 const char* const kIdColumns[] = {"scene", "workload", "scheme", "kernel", "params", "layout", "view",
                                   "threads", "width", "height", "row", "table", "rays_file"};
-// Accuracy columns whose change is reported.
-const char* const kAccuracyColumns[] = {"mismatch_rate", "false_miss", "false_hit", "wrong_t", "ambiguous"};
 
 // Where a value sits, for its message: "<file>: row N (scene / workload / scheme)", N the line in
 // the file (the header is line 1).
@@ -210,14 +216,10 @@ std::vector<double> parse_samples(const CsvTable& t, size_t row, int col) {
   return out;
 }
 
-// An accuracy column: a count or a rate, finite and >= 0 (a rate at most 1).
 double accuracy(const CsvTable& t, size_t row, int col, const std::string& name) {
   const std::string& s = t.at(row, col);
-  const std::optional<double> v = parse_number(s);
-  const bool rate = name == "mismatch_rate";
-  if (v && std::isfinite(*v) && *v >= 0 && (!rate || *v <= 1)) return *v;
-  throw InputError(where(t, row) + ": " + name + ": '" + s + "' is not " +
-                   (rate ? "a rate (a finite number in [0, 1])" : "a count (a finite number >= 0)"));
+  if (is_accuracy_value(s, name)) return *parse_number(s);
+  throw InputError(where(t, row) + ": " + name + ": '" + s + "' is not " + accuracy_value_kind(name));
 }
 
 std::string shown(double v) {

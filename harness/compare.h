@@ -39,6 +39,12 @@ std::optional<double> parse_number(const std::string& text);
 // Whether `text` is a speed as a run row writes it (Mrays/s): a finite number > 0, or 0 in a row
 // without rays (nothing was timed). `compare` and `run --resume` check speeds by it.
 bool is_speed(const std::string& text, bool no_rays);
+// The accuracy columns of a run row, and whether `text` is a value of `column` as a run writes it:
+// a count (finite, >= 0), or for mismatch_rate a rate in [0, 1]. `compare` and every --resume
+// check them by it; accuracy_value_kind says what the column holds, for a message.
+inline constexpr const char* kAccuracyColumns[] = {"mismatch_rate", "false_miss", "false_hit", "wrong_t", "ambiguous"};
+bool is_accuracy_value(const std::string& text, const std::string& column);
+std::string accuracy_value_kind(const std::string& column);
 
 // Two-sided Mann-Whitney U test (Mann & Whitney 1947): the probability, under the hypothesis that
 // both samples come from one distribution, of a U statistic at least as far from n1*n2/2 as the

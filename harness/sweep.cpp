@@ -12,7 +12,7 @@
 #include <fstream>
 #include <map>
 
-#include "harness/compare.h"  // read_csv, is_speed
+#include "harness/compare.h"  // read_csv, is_speed, is_accuracy_value
 #include "harness/experiment.h"
 #include "structures/scene.h"  // InputError
 
@@ -54,6 +54,24 @@ void cut_torn_line(const std::string& path) {
 }
 
 std::string shown(const nlohmann::json& j) { return j.is_null() ? "(none)" : j.dump(); }
+
+// The values a resumed row brings into the finished file, checked as `compare` checks them: the
+// speeds are speeds, and the error columns (the accuracy kinds every figure is published with)
+// are counts or rates >= 0. A kept row is trusted otherwise; one damaged by hand or by another
+// tool would have been printed and plotted as measured (`table --resume` printed "abc" Mrays/s).
+// speeds_required: a run row has them all; a table row may leave one empty (nothing timed).
+void check_kept_values(const Record& r, const std::string& where, bool speeds_required) {
+  const std::string fix = " (remove the CSV or drop --resume)";
+  auto f = [&](const char* k) { const std::string* v = r.get(k); return v ? *v : std::string(); };
+  const bool no_rays = f("rays") == "0";
+  for (const char* col : {"mrays_median", "mrays_min", "mrays_max"})
+    if ((speeds_required || !f(col).empty()) && !is_speed(f(col), no_rays))
+      throw InputError("--resume: " + where + ": " + col + " '" + f(col) +
+                       "' is not a speed (Mrays/s: a finite number > 0, or 0 for a cell without rays)" + fix);
+  for (const char* col : kAccuracyColumns)
+    if (!f(col).empty() && !is_accuracy_value(f(col), col))
+      throw InputError("--resume: " + where + ": " + col + " '" + f(col) + "' is not " + accuracy_value_kind(col) + fix);
+}
 
 }  // namespace
 
@@ -177,6 +195,7 @@ const Record* CellStream::replay(const std::string& scene, const std::string& wo
     throw InputError("--resume: row " + std::to_string(replayed_ + 2) + " of " + path_ + " is " + f("scene") + " / " +
                      f("workload") + " / " + f("scheme") + ", this table's cell there is " + scene + " / " + workload +
                      " / " + scheme + "; the table's cells changed (remove the CSV or drop --resume)");
+  check_kept_values(r, path_ + ": row " + std::to_string(replayed_ + 2) + " (" + workload + " / " + scheme + ")", false);
   return &records_[replayed_++];
 }
 
@@ -260,10 +279,7 @@ void check_resumed_rows(CellStream& stream, const RunOptions& opt, const std::st
     if (const auto [it, fresh] = seen.emplace(key, line); !fresh)
       throw InputError("--resume: " + csv + ": " + cell + " is the cell of row " + std::to_string(it->second) +
                        " again; a sweep measures a cell once" + fix);
-    for (const char* col : {"mrays_median", "mrays_min", "mrays_max"})
-      if (!is_speed(f(col), f("rays") == "0"))
-        throw InputError("--resume: " + csv + ": " + cell + ": " + col + " '" + f(col) +
-                         "' is not a speed (Mrays/s: a finite number > 0, or 0 for a cell without rays)" + fix);
+    check_kept_values(r, csv + ": " + cell, true);
     keep[i] = true;
   }
   if (dropped == 0) return;

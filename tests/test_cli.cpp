@@ -494,6 +494,53 @@ TEST(CellStream, TableReplayChecksCellOrderAndSceneContent) {
   std::filesystem::remove_all(dir);
 }
 
+// A kept row's values are checked as `run --resume` and `compare` check them: a damaged speed or
+// accuracy value is refused with its row and column, not printed and plotted as measured (the
+// bounce table printed "abc" Mrays/s for such a row and finished with status complete).
+TEST(CellStream, TableReplayRefusesDamagedValues) {
+  const auto dir = test::temp_dir("cellstream_values");
+  const std::string csv = (dir / "t.csv").string();
+  const nlohmann::json meta = {{"command", "table test"}};
+  auto expect_refused = [&](const char* col, const std::string& value, const std::string& says) {
+    {
+      CellStream s(csv, meta, false, {"command"});
+      Record r;
+      r.set("scene", "sphere").set("workload", "primary").set("scheme", "bvh_single").set("rays", 64);
+      r.set("mrays_median", 1.5).set("mrays_min", 1.25).set("mismatch_rate", 0).set("false_miss", 0).set(col, value);
+      s.append(r);
+    }
+    CellStream s(csv, meta, true, {"command"});
+    try {
+      s.replay("sphere", "primary", "bvh_single");
+      ADD_FAILURE() << col << " '" << value << "' was kept";
+    } catch (const InputError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find("row 2"), std::string::npos) << m;
+      EXPECT_NE(m.find(std::string(col) + " '" + value + "'"), std::string::npos) << m;
+      EXPECT_NE(m.find(says), std::string::npos) << m;
+    }
+    std::filesystem::remove(csv);
+    std::filesystem::remove(sidecar_path(csv));
+  };
+  expect_refused("mrays_median", "abc", "not a speed");
+  expect_refused("mrays_median", "nan", "not a speed");
+  expect_refused("mrays_min", "-3", "not a speed");
+  expect_refused("mrays_median", "0", "not a speed");  // 64 rays: 0 Mrays/s was not measured
+  expect_refused("mismatch_rate", "1.5", "a rate");
+  expect_refused("false_miss", "-1", "a count");
+  expect_refused("false_miss", "inf", "a count");
+  // An empty speed is a table row that timed nothing, and stays.
+  {
+    CellStream s(csv, meta, false, {"command"});
+    Record r;
+    r.set("scene", "sphere").set("workload", "primary").set("scheme", "simt").set("mrays_median", "");
+    s.append(r);
+  }
+  CellStream s(csv, meta, true, {"command"});
+  EXPECT_NE(s.replay("sphere", "primary", "simt"), nullptr);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(CLI, BadInputGivesOneLineAndNonZeroExit) {
   const auto dir = test::temp_dir("cli_bad");
   std::ofstream(dir / "bad.bin") << "not rays";
