@@ -108,9 +108,7 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
         } else {
           push_sorted8(rv, tn, entered, count, stack + sp);
         }
-        alignas(32) uint32_t rs[8];
-        _mm256_store_si256(reinterpret_cast<__m256i*>(rs), rv);
-        cur = rs[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
+        cur = nearest_ref8(rv, mbvh_simd::sort_keys8(tn, entered));
       }
       if constexpr (P::enabled) {
         for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));

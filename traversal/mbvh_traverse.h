@@ -56,10 +56,13 @@ inline __m128i sort4(__m128i k) {
   p = _mm_shuffle_epi32(k, _MM_SHUFFLE(3, 1, 2, 0));
   return _mm_blend_epi32(_mm_min_epi32(k, p), _mm_max_epi32(k, p), 0b0100);
 }
+// The index bits go in before the blend (the miss keys are constants): the and/or then run beside
+// the plane compare that makes `hit`, not after it on the path to the next node's address.
 inline __m256i sort_keys8(__m256 dist, __m256 hit) {
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  __m256i k = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF)), dist, hit));
-  return _mm256_or_si256(_mm256_and_si256(k, _mm256_set1_epi32(~7)), lane);
+  const __m256i k = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(dist), _mm256_set1_epi32(~7)), lane);
+  const __m256i miss = _mm256_or_si256(_mm256_set1_epi32(0x7FFFFFF8), lane);
+  return _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(miss), _mm256_castsi256_ps(k), hit));
 }
 // The 8-wide equivalent: Batcher's bitonic network, 6 stages of (partner shuffle, min, max, blend).
 inline __m256i sort8(__m256i k) {
@@ -435,11 +438,20 @@ inline uint32_t push_sorted(const MBVHNode<N>& nd, typename simd::V<N>::f tn, ty
 
 // The smallest of 8 sort keys (mbvh_simd::sort_keys8: distance bits with the child index in the
 // low 3 bits; misses are the largest key): three shuffle + min steps.
-inline uint32_t min_key8(__m256i k) {
+inline __m256i min_keys8(__m256i k) {
   k = _mm256_min_epi32(k, _mm256_permute2x128_si256(k, k, 0x01));
   k = _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(1, 0, 3, 2)));
-  k = _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)));
-  return uint32_t(_mm256_cvtsi256_si32(k));
+  return _mm256_min_epi32(k, _mm256_shuffle_epi32(k, _MM_SHUFFLE(2, 3, 0, 1)));
+}
+// The reference of the child with the smallest key: a permute of the references by the key
+// (vpermd reads its low 3 bits, the child index) instead of a move to a scalar register, a mask
+// and a load. The single-ray loop is bound by the chain from a node's planes to its nearest
+// child's address (perf: the samples sit on the node and block loads and on the key reduction,
+// and a 9% cut in instructions that lengthened the chain at pops made bounce rays 4-13% slower),
+// so cycles on that chain count, not instructions: with sort_keys8's and/or taken off it too,
+// mbvh8_single +2 to +5% on bounce:2 (docs/PERFORMANCE.md, session 26).
+inline uint32_t nearest_ref8(__m256i refs, __m256i keys) {
+  return uint32_t(_mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(refs, min_keys8(keys))));
 }
 
 // How mbvh_traverse orders the entered children of a node (a template parameter of the one loop,
@@ -448,7 +460,7 @@ inline uint32_t min_key8(__m256i k) {
 //    the branch-free network (Alg. 2.10 for N = 4, bitonic for N = 8).
 //  sort_always (N = 8): every node with an entered child takes the same path: the bitonic network
 //    sorts the keys and pushes all but the nearest (push_sorted; with one child it pushes nothing),
-//    and the nearest comes from a three-step min reduction of the unsorted keys (min_key8), so the
+//    and the nearest comes from a three-step min reduction of the unsorted keys (nearest_ref8), so the
 //    next node's address does not wait for the whole network. With 8 children the count varies
 //    from node to node and the branches of `branching`, plus the data-dependent compare of its
 //    two-child case, mispredict often. Measured on bounce:2 (512x512, 7 reps, median, ratio to
@@ -579,7 +591,8 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
           if constexpr (P::enabled) {
             for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
           }
-          cur = nd.ref[min_key8(mbvh_simd::sort_keys8(tn, entered)) & 7];
+          cur = nearest_ref8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)),
+                             mbvh_simd::sort_keys8(tn, entered));
           sp += uint32_t(count - 1);
           continue;
         }
