@@ -87,8 +87,12 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
       };
       cur = enter_branching<8>(
           mask, tn, ref, prefetch,
-          [&](int count, MBVHStackEntry* out) { return push_sorted8(refs(), tn, entered, count, out); }, stack, sp,
-          probe);
+          [&](int count, MBVHStackEntry* out) {
+            const __m256i rv = refs();
+            push_sorted8(rv, tn, entered, count, out);
+            return nearest_ref8(rv, mbvh_simd::sort_keys8(tn, entered));  // beside the network, not after it
+          },
+          stack, sp, probe);
       return true;
     } else {
       const int count = std::popcount(unsigned(mask));

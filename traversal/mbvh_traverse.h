@@ -599,8 +599,17 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
       } else if (mask) {
         cur = enter_branching<N>(
             mask, tn, [&](uint32_t i) { return nd.ref[i]; }, [&](uint32_t ref) { prefetch_ref(m, ref); },
-            [&](int count, MBVHStackEntry* out) { return push_sorted<N>(nd, tn, entered, count, out); }, stack, sp,
-            probe);
+            [&](int count, MBVHStackEntry* out) {
+              if constexpr (N == 8) {
+                // The nearest by the min reduction beside the network, not after it (nearest_ref8).
+                push_sorted<N>(nd, tn, entered, count, out);
+                return nearest_ref8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)),
+                                    mbvh_simd::sort_keys8(tn, entered));
+              } else {
+                return push_sorted<N>(nd, tn, entered, count, out);
+              }
+            },
+            stack, sp, probe);
         continue;
       }
     } else {
