@@ -2,6 +2,7 @@
 // invariants, the SIMD primitives against their scalar definitions, counters, stream sizes and
 // kernel variants. Accuracy on every workload and the hard cases comes from test_schemes.cpp,
 // which iterates the registry.
+#include <algorithm>
 #include <random>
 
 #include "cachesim/hierarchy.h"
@@ -380,6 +381,16 @@ TEST(MBVH, SortingNetworksArePermutationsUnderDAZ) {
     };
     check(k8, 8);
     check(k4, 4);
+    // nearest_ref8 (the traversal's next node): the reference of the sorted network's first key,
+    // i.e. of the entered child with the smallest key (the lowest slot on equal distances).
+    const bool any = std::any_of(hitm, hitm + 8, [](uint32_t h) { return h != 0; });
+    if (any) {
+      alignas(32) uint32_t refs[8];
+      for (uint32_t i = 0; i < 8; ++i) refs[i] = 1000 + 17 * i;
+      const __m256i keys = mbvh_simd::sort_keys8(_mm256_load_ps(d), _mm256_load_ps(reinterpret_cast<float*>(hitm)));
+      EXPECT_EQ(nearest_ref8(_mm256_load_si256(reinterpret_cast<const __m256i*>(refs)), keys), refs[k8[0] & 7]);
+      EXPECT_NE(hitm[k8[0] & 7], 0u);
+    }
     if (HasFailure()) break;
   }
 }
