@@ -453,6 +453,10 @@ inline __m256i min_keys8(__m256i k) {
 inline uint32_t nearest_ref8(__m256i refs, __m256i keys) {
   return uint32_t(_mm256_cvtsi256_si32(_mm256_permutevar8x32_epi32(refs, min_keys8(keys))));
 }
+// The same on an MBVH8 node: the entered child (`entered`, entry distances `tn`) to visit first.
+inline uint32_t nearest_child8(const MBVHNode<8>& nd, __m256 tn, __m256 entered) {
+  return nearest_ref8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)), mbvh_simd::sort_keys8(tn, entered));
+}
 
 // How mbvh_traverse orders the entered children of a node (a template parameter of the one loop,
 // as madmann91/bvh v2 makes its variants, rather than a copy of the loop per variant).
@@ -591,8 +595,7 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
           if constexpr (P::enabled) {
             for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
           }
-          cur = nearest_ref8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)),
-                             mbvh_simd::sort_keys8(tn, entered));
+          cur = nearest_child8(nd, tn, entered);
           sp += uint32_t(count - 1);
           continue;
         }
@@ -600,14 +603,10 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
         cur = enter_branching<N>(
             mask, tn, [&](uint32_t i) { return nd.ref[i]; }, [&](uint32_t ref) { prefetch_ref(m, ref); },
             [&](int count, MBVHStackEntry* out) {
-              if constexpr (N == 8) {
-                // The nearest by the min reduction beside the network, not after it (nearest_ref8).
-                push_sorted<N>(nd, tn, entered, count, out);
-                return nearest_ref8(_mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)),
-                                    mbvh_simd::sort_keys8(tn, entered));
-              } else {
-                return push_sorted<N>(nd, tn, entered, count, out);
-              }
+              const uint32_t first = push_sorted<N>(nd, tn, entered, count, out);
+              // N = 8: the nearest by the min reduction beside the network, not after it.
+              if constexpr (N == 8) return nearest_child8(nd, tn, entered);
+              else return first;
             },
             stack, sp, probe);
         continue;

@@ -51,11 +51,11 @@ void write_rays(const std::string& path, const RayBatch& b) {
   for (uint32_t p = 0; uniform && p < b.num_packets(); ++p)
     uniform &= b.packet_begin[p] == uint64_t(p) * b.packet_size;
   const uint32_t packet_count = uniform ? 0 : b.num_packets();
+  f.data.reserve(24 + count * 32 + (packet_count ? (size_t(packet_count) + 1) * 4 : 0));
   f.put(kRayMagic, 8);
   f.put(&count, 8);
   f.put(&b.packet_size, 4);
   f.put(&packet_count, 4);
-  f.data.reserve(24 + count * 32 + (packet_count ? (size_t(packet_count) + 1) * 4 : 0));
   for (const Ray& r : b.rays) {
     const float v[8] = {r.org.x, r.org.y, r.org.z, r.dir.x, r.dir.y, r.dir.z, r.tmin, r.tmax};
     f.put(v, sizeof v);
