@@ -10,8 +10,12 @@
 //   * Interior nodes, coherent groups (one origin and common direction signs, in a common-origin
 //     batch: Embree's coherent hint): the group's interval bounds (GroupIA below) test all 8
 //     children at once, as one interval ray, and order them; each child they keep is then tested
-//     against the active lanes (one 8-lane slab test, the kernel library's slab<8>) and pushed
-//     only if some lane enters it.
+//     against the active lanes (one 8-lane slab test, the kernel library's slab<8>, on the plane
+//     offsets the interval test has already formed) and pushed only if some lane enters it; the
+//     nearest such child is entered at once, without a push and pop (as Embree's coherent
+//     traversal keeps its `cur`). One or two kept children are ordered without the sort network.
+//     Those three together with the tfar update below: +3 to +9% against embree_packet8 on the
+//     scanned models and the held-out-shaped scene (docs/PERFORMANCE.md, session 27).
 //   * Interior nodes, other groups: every child against the active lanes, ordered by the nearest
 //     lane's entry distance.
 //   * Leaves: each active lane tests the leaf's triangle blocks with mbvh8_single's block test
@@ -77,7 +81,6 @@ struct Group {
   Vec3 org;
   const Ray* rays = nullptr;
   uint32_t n = 0;
-  alignas(32) float tf[kW];  // the lanes of G.tfar, kept in step with hit[l].t
   Hit hit[kW];
   float tfar_max = 0;  // the largest lane of G.tfar
   uint32_t ready = 0;  // lanes whose hit record is set (prepare_lane)
@@ -100,7 +103,6 @@ struct Group {
       d8[a] = v[4 + a];
       common &= _mm256_movemask_ps(_mm256_cmp_ps(v[a], _mm256_set1_ps(org[a]), _CMP_EQ_OQ)) == 0xFF;
     }
-    _mm256_store_ps(tf, G.tfar);
     tfar_max = Packet::hmax8(G.tfar);
     if constexpr (P::enabled) {
       for (uint32_t l = 0; l < n; ++l) probe.read(&r[l], sizeof(Ray));
@@ -222,11 +224,14 @@ struct Group {
       }
     }
   }
-  void sync_lane(uint32_t l) { tf[l] = hit[l].t; }
-  void sync() {
-    G.tfar = _mm256_load_ps(tf);
-    tfar_max = Packet::hmax8(G.tfar);
+  // Lane l of G.tfar from its closest hit: a broadcast and a blend, not a scalar store into an
+  // array that sync then reads as a vector (a 4-byte store cannot forward to a 32-byte load: perf
+  // put 5% of the packet loop's samples on that reload after every leaf).
+  void sync_lane(uint32_t l) {
+    const __m256 lane = _mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32(int(l))));
+    G.tfar = _mm256_blendv_ps(G.tfar, _mm256_set1_ps(hit[l].t), lane);
   }
+  void sync() { tfar_max = Packet::hmax8(G.tfar); }
   // A lane that never needed its constants never reached a leaf: it hits nothing.
   [[gnu::always_inline]] Hit result(uint32_t l) const { return ready >> l & 1 ? finish_hit(hit[l]) : finish_hit(Hit{INFINITY, kNoHit, 0.f, 0.f}); }
 };
@@ -264,15 +269,17 @@ struct GroupIA {
     tmin = _mm256_set1_ps(Packet::hmin8(G.tmin));
     return true;
   }
-  // The children some lane may enter before tfar (all-ones lanes) and their entry bounds n.
-  [[gnu::always_inline]] __m256 test(const MBVHNode<8>& nd, float tfar, __m256& n) const {
+  // The children some lane may enter before tfar (all-ones lanes) and their entry bounds n; xn,
+  // xf: each child's near and far plane offsets (plane - o) per axis, as child_test's
+  // same_sign_hits<true> computes them (the same subtraction: child_ia_test reuses them).
+  [[gnu::always_inline]] __m256 test(const MBVHNode<8>& nd, float tfar, __m256& n, __m256 (&xn)[3], __m256 (&xf)[3]) const {
     const __m256 pad = _mm256_set1_ps(kFarPad);
     __m256 lo = tmin, hi = _mm256_set1_ps(tfar);
     for (int a = 0; a < 3; ++a) {
       const __m256 bl = _mm256_load_ps(nd.box[a]), bh = _mm256_load_ps(nd.box[3 + a]);
-      const __m256 xn = _mm256_sub_ps(neg[a] ? bh : bl, o[a]), xf = _mm256_sub_ps(neg[a] ? bl : bh, o[a]);
-      lo = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(xn, r0[a]), _mm256_mul_ps(xn, r1[a])), lo);
-      hi = _mm256_min_ps(_mm256_mul_ps(_mm256_max_ps(_mm256_mul_ps(xf, r0[a]), _mm256_mul_ps(xf, r1[a])), pad), hi);
+      xn[a] = _mm256_sub_ps(neg[a] ? bh : bl, o[a]), xf[a] = _mm256_sub_ps(neg[a] ? bl : bh, o[a]);
+      lo = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(xn[a], r0[a]), _mm256_mul_ps(xn[a], r1[a])), lo);
+      hi = _mm256_min_ps(_mm256_mul_ps(_mm256_max_ps(_mm256_mul_ps(xf[a], r0[a]), _mm256_mul_ps(xf[a], r1[a])), pad), hi);
     }
     n = lo;
     return _mm256_cmp_ps(lo, hi, _CMP_LE_OQ);
@@ -296,6 +303,18 @@ struct GroupIA {
     in = packet::same_sign_hits<false>(grp.G, grp.sign, grp.org, lo, hi, tn);
   }
   return _mm256_and_ps(in, act);
+}
+
+// child_test for a coherent group (GroupIA's: one origin, shared direction signs) from the plane
+// offsets GroupIA::test computed for all children: child c's lane broadcast instead of its six
+// planes loaded, subtracted and broadcast again. The same values as same_sign_hits<true> (the
+// same subtraction of the same operands), so the same lanes and distances.
+[[gnu::always_inline]] inline __m256 child_ia_test(const Group& grp, const __m256 (&xn)[3], const __m256 (&xf)[3], uint32_t c,
+                                                   __m256 act, __m256& tn) {
+  const __m256i ci = _mm256_set1_epi32(int(c));
+  const __m256 n[3] = {_mm256_permutevar8x32_ps(xn[0], ci), _mm256_permutevar8x32_ps(xn[1], ci), _mm256_permutevar8x32_ps(xn[2], ci)};
+  const __m256 f[3] = {_mm256_permutevar8x32_ps(xf[0], ci), _mm256_permutevar8x32_ps(xf[1], ci), _mm256_permutevar8x32_ps(xf[2], ci)};
+  return _mm256_and_ps(slab<8, false>(n, f, grp.G.inv, grp.G.inv, grp.G.tmin, grp.G.tfar, tn), act);
 }
 
 class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
@@ -396,18 +415,37 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
           if constexpr (kIA) {
             // The interval test culls and orders the children (nearest bound first); each child it
             // keeps is pushed, far to near, if some active lane's own test enters it.
-            __m256 bound;
-            const __m256 maybe = ia->test(nd, g.tfar_max, bound);
+            __m256 bound, xn[3], xf[3];
+            const __m256 maybe = ia->test(nd, g.tfar_max, bound, xn, xf);
             const int mask = _mm256_movemask_ps(maybe);
             alignas(32) uint32_t keys[8];
-            _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(bound, maybe)));
-            for (int j = std::popcount(unsigned(mask)); j-- > 0;) {
+            const int kept = std::popcount(unsigned(mask));
+            if (kept == 1) {
+              keys[0] = uint32_t(std::countr_zero(unsigned(mask)));
+            } else if (kept == 2) {
+              uint32_t c0 = uint32_t(std::countr_zero(unsigned(mask))), c1 = uint32_t(std::countr_zero(unsigned(mask & (mask - 1))));
+              alignas(32) float b[8];
+              _mm256_store_ps(b, bound);
+              if (b[c1] < b[c0]) std::swap(c0, c1);
+              keys[0] = c0, keys[1] = c1;
+            } else {
+              _mm256_store_si256(reinterpret_cast<__m256i*>(keys), mbvh_simd::sort8(mbvh_simd::sort_keys8(bound, maybe)));
+            }
+            bool any = false;
+            uint32_t next = 0;
+            __m256 next_tn = inf;
+            for (int j = kept; j-- > 0;) {
               const uint32_t c = keys[j] & 7;
               __m256 tn;
-              const __m256 in = child_test(g, nd, c, act, tn);
+              const __m256 in = child_ia_test(g, xn, xf, c, act, tn);
               if (_mm256_testz_ps(in, in)) continue;
               prefetch_any(m, nd.ref[c]);
-              push(stack, sp, _mm256_blendv_ps(inf, tn, in), nd.ref[c], probe);
+              if (any) push(stack, sp, next_tn, next, probe);
+              any = true, next = nd.ref[c], next_tn = _mm256_blendv_ps(inf, tn, in);
+            }
+            if (any) {
+              cur = next, tn_cur = next_tn;
+              continue;
             }
           } else {
             // Every child against the active lanes, ordered by the nearest lane's entry distance.
