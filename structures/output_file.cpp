@@ -28,6 +28,23 @@ std::string file_kind(const fs::file_status& st) {
   }
 }
 
+// The process' file-creation mask without changing it: Linux reports it in /proc/self/status
+// ("Umask:", since 4.7). Setting and restoring it with umask() would be the fallback, but that
+// is a moment in which a file another thread creates gets mode 0666/0777.
+mode_t process_umask() {
+  if (std::FILE* f = std::fopen("/proc/self/status", "re")) {
+    char line[256];
+    unsigned mask = 0;
+    bool found = false;
+    while (!found && std::fgets(line, sizeof line, f)) found = std::sscanf(line, "Umask: %o", &mask) == 1;
+    std::fclose(f);
+    if (found) return mode_t(mask);
+  }
+  const mode_t mask = ::umask(0);
+  ::umask(mask);
+  return mask;
+}
+
 }  // namespace
 
 std::string output_target(const std::string& path) {
@@ -70,9 +87,8 @@ void write_file_durably(const std::string& file, std::string_view text) {
   std::string tmp = path + ".tmp.XXXXXX";
   const int fd = ::mkostemp(tmp.data(), O_CLOEXEC);
   if (fd < 0) throw InputError(path + ": cannot open for writing (" + std::strerror(errno) + ")");
-  const mode_t mask = ::umask(0);  // mkostemp makes it 0600; the file gets what open(0644) gives
-  ::umask(mask);
-  bool ok = ::fchmod(fd, 0644 & ~mask) == 0;
+  // mkostemp makes it 0600; the file gets what open(0644) gives.
+  bool ok = ::fchmod(fd, 0644 & ~process_umask()) == 0;
   for (size_t off = 0; ok && off < text.size();) {
     const ssize_t n = ::write(fd, text.data() + off, text.size() - off);
     ok = n > 0;

@@ -105,6 +105,21 @@ TEST_F(BadInputCli, DurableWriteRefusesANonRegularTarget) {
   EXPECT_NO_THROW(check_output_file(path("new.csv")));
 }
 
+// A durably written file gets the mode open(0644) would give under the process' umask (mkostemp
+// makes the temporary 0600), and the umask is read without being changed (no moment in which a
+// file another thread creates would get 0666).
+TEST_F(BadInputCli, DurableWriteTakesTheUmaskWithoutChangingIt) {
+  for (const mode_t mask : {mode_t(027), mode_t(022), mode_t(077)}) {
+    const mode_t old = ::umask(mask);
+    write_file_durably(path("mode.csv"), "x\n");
+    const mode_t now = ::umask(old);
+    struct stat st {};
+    ASSERT_EQ(::stat(path("mode.csv").c_str(), &st), 0);
+    EXPECT_EQ(st.st_mode & 0777, 0644 & ~mask) << "umask " << std::oct << mask;
+    EXPECT_EQ(now, mask) << "the umask was changed";
+  }
+}
+
 // Ray files, hit files and images are written like the CSVs (temporary + rename): a write that
 // fails part-way (here the file-size limit, as a full disk would) leaves the old file whole and no
 // temporary behind. They were written in place: a cut file with a valid header.
