@@ -173,11 +173,70 @@ void check_scene_file(const std::string& path) {
                 " (expected .gltf, .glb, .obj, .ply, .off or .stl)"));
 }
 
+namespace {
+
+// %XX escapes of a glTF URI decoded (glTF 2.0 §3.3: URIs are RFC 3986; the loader resolves
+// relative ones against the file's directory, as tinygltf does).
+std::string percent_decoded(const std::string& uri) {
+  std::string out;
+  for (size_t i = 0; i < uri.size(); ++i) {
+    if (uri[i] == '%' && i + 2 < uri.size() && std::isxdigit(static_cast<unsigned char>(uri[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(uri[i + 2]))) {
+      out.push_back(static_cast<char>(std::stoi(uri.substr(i + 1, 2), nullptr, 16)));
+      i += 2;
+    } else {
+      out.push_back(uri[i]);
+    }
+  }
+  return out;
+}
+
+// The external files a glTF file names (buffers and images with a URI that is not a data: URI),
+// resolved against its directory; only those that exist as regular files. The JSON of a .glb is
+// its first chunk (glTF 2.0 §4.4: a 12-byte header, then the chunk's length and type "JSON").
+// A file that does not parse names nothing here: loading it reports the error.
+std::vector<std::string> gltf_external_files(const std::string& path) {
+  std::string text;
+  try {
+    text = detail::read_file_bytes(path);
+  } catch (const InputError&) {
+    return {};
+  }
+  if (text.size() >= 20 && std::memcmp(text.data(), "glTF", 4) == 0) {
+    uint32_t length = 0;
+    std::memcpy(&length, text.data() + 12, 4);
+    if (std::memcmp(text.data() + 16, "JSON", 4) != 0 || length > text.size() - 20) return {};
+    text = text.substr(20, length);
+  }
+  const nlohmann::json root = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  std::vector<std::string> files;
+  if (!root.is_object()) return files;
+  const fs::path dir = fs::path(path).parent_path();
+  for (const char* key : {"buffers", "images"}) {
+    const auto it = root.find(key);
+    if (it == root.end() || !it->is_array()) continue;
+    for (const nlohmann::json& e : *it) {
+      if (!e.is_object() || !e.contains("uri") || !e["uri"].is_string()) continue;
+      const std::string uri = e["uri"].get<std::string>();
+      if (uri.rfind("data:", 0) == 0) continue;
+      const fs::path f = dir / percent_decoded(uri);
+      std::error_code ec;
+      if (fs::is_regular_file(f, ec)) files.push_back(f.string());
+    }
+  }
+  return files;
+}
+
+}  // namespace
+
 std::vector<std::string> scene_file_inputs(const std::string& path) {
   std::vector<std::string> files = {path};
   const fs::path json = scenes_json_of(path);
   std::error_code ec;
   if (fs::is_regular_file(json, ec)) files.push_back(json.string());
+  const std::string ext = lower_extension(path);
+  if (ext == ".gltf" || ext == ".glb")
+    for (std::string& f : gltf_external_files(path)) files.push_back(std::move(f));
   return files;
 }
 

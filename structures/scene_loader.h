@@ -25,8 +25,9 @@ bool has_scene_file_extension(const std::string& path);
 // What load_scene_file checks before reading: an existing, readable, non-empty regular file with a
 // known extension; InputError "<path>: <what>" otherwise. Cheap, so commands check it up front.
 void check_scene_file(const std::string& path);
-// The files loading the scene file `path` reads as a whole: the file and the scenes.json beside
-// it, when there is one (its camera views). What a command must not write over.
+// The files loading the scene file `path` reads as a whole: the file, the scenes.json beside
+// it when there is one (its camera views), and a glTF file's external buffers and images. What a
+// command must not write over.
 std::vector<std::string> scene_file_inputs(const std::string& path);
 
 // The views that the scenes.json in the scene file's directory lists for that file (named view1,

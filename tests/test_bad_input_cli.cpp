@@ -219,6 +219,23 @@ TEST_F(BadInputCli, OutputThatIsAnInputIsRefusedAndTheInputKept) {
   expect_rejected("run --scene " + scene + " --schemes bvh_single --csv " + path("scenes.json"), {"scenes.json", "same file"});
   EXPECT_EQ(read("s.obj"), kTri);
   EXPECT_EQ(read("scenes.json"), "{}");
+  // A glTF file's external buffer (its URI percent-encoded, resolved against the file's directory)
+  // is an input too: writing over it would leave a scene that no longer loads.
+  std::string positions(36, '\0');
+  const float xyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  std::memcpy(positions.data(), xyz, sizeof xyz);
+  write("tri angle.bin", positions);
+  const std::string gltf = write("ext.gltf", R"({"asset": {"version": "2.0"}, "buffers": [{"byteLength": 36, "uri": "tri%20angle.bin"}],
+  "bufferViews": [{"buffer": 0, "byteLength": 36}],
+  "accessors": [{"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 3}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}], "nodes": [{"mesh": 0}]})");
+  EXPECT_EQ(travbench("run --scene " + gltf + " --schemes bvh_single --reps 1 --width 16 --height 16 --csv " + path("ok.csv")).code, 0)
+      << "the external-buffer scene loads";
+  const std::string buffer = "'" + path("tri angle.bin") + "'";  // a shell word
+  expect_rejected("run --scene " + gltf + " --schemes bvh_single --csv " + buffer,
+                  {"--csv", "external file", "same file"});
+  expect_rejected("rays --scene " + gltf + " --workload primary --out " + buffer, {"--out", "external file"});
+  EXPECT_EQ(read("tri angle.bin"), positions);
 
   const std::string a = run_csv("a.csv"), b = run_csv("b.csv");
   const std::string a_bytes = read("a.csv");
