@@ -7,6 +7,7 @@ plot; the thesis' values are drawn as hollow markers.
 """
 import csv
 import math
+import zlib
 import sys
 from pathlib import Path
 
@@ -18,13 +19,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 SCHEME_ORDER = [
     "bvh_single", "mbvh4_single", "mbvh8_single", "kd_single", "kd_packet", "bvh_masked", "bvh_ranged",
     "bvh_partition", "mbvh_rs", "raygrid", "cwbvh_single", "treelet_queue", "embree_single", "embree_packet8", "embree_stream", "reference",
+    "mbvh8_packet", "simt_bvh",
 ]
 _palette = plt.get_cmap("tab20").colors
 
 
 def colour(scheme):
     base = scheme.split("@")[0]
-    i = SCHEME_ORDER.index(base) if base in SCHEME_ORDER else len(SCHEME_ORDER) + hash(base) % 6
+    i = SCHEME_ORDER.index(base) if base in SCHEME_ORDER else len(SCHEME_ORDER) + zlib.crc32(base.encode()) % 6  # stable across runs (str hash is salted)
     return _palette[i % len(_palette)]
 
 
