@@ -14,8 +14,9 @@
 //     offsets the interval test has already formed) and pushed only if some lane enters it; the
 //     nearest such child is entered at once, without a push and pop (as Embree's coherent
 //     traversal keeps its `cur`). One or two kept children are ordered without the sort network.
-//     Those three together with the tfar update below: +3 to +9% against embree_packet8 on the
-//     scanned models and the held-out-shaped scene (docs/PERFORMANCE.md, session 27).
+//     Those three together with the tfar update (Group::sync_lane): +2 to +19% (median +9%) against
+//     embree_packet8 on the scanned models, the held-out-shaped scene, spheres:1M and sponza, the
+//     same hits (docs/PERFORMANCE.md, session 27).
 //   * Interior nodes, other groups: every child against the active lanes, ordered by the nearest
 //     lane's entry distance.
 //   * Leaves: each active lane tests the leaf's triangle blocks with mbvh8_single's block test
@@ -414,7 +415,11 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
           probe.node(&nd, sizeof(nd), count);
           if constexpr (kIA) {
             // The interval test culls and orders the children (nearest bound first); each child it
-            // keeps is pushed, far to near, if some active lane's own test enters it.
+            // keeps is pushed, far to near, if some active lane's own test enters it, except the
+            // nearest such child, which is entered at once. Two kept children are ordered by their
+            // bounds, an exact tie to the lower slot (the network's keys give the distance's low 3
+            // bits to the slot, so within 8 ulps they may order by slot: the order differs there,
+            // never a lane's closest distance).
             __m256 bound, xn[3], xf[3];
             const __m256 maybe = ia->test(nd, g.tfar_max, bound, xn, xf);
             const int mask = _mm256_movemask_ps(maybe);
