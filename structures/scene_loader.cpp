@@ -194,19 +194,28 @@ std::string percent_decoded(const std::string& uri) {
 // The external files a glTF file names (buffers and images with a URI that is not a data: URI),
 // resolved against its directory; only those that exist as regular files. The JSON of a .glb is
 // its first chunk (glTF 2.0 §4.4: a 12-byte header, then the chunk's length and type "JSON").
-// A file that does not parse names nothing here: loading it reports the error.
+// A file that does not parse names nothing here: loading it reports the error. Of a .glb only the
+// header and the JSON chunk are read (the commands list their inputs before loading the scene, and
+// the binary chunk may be most of a large file).
 std::vector<std::string> gltf_external_files(const std::string& path) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return {};  // never open a FIFO or a device here
+  const uintmax_t size = fs::file_size(path, ec);
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> f(std::fopen(path.c_str(), "rb"), &std::fclose);
+  if (ec || !f) return {};
+  char head[20];
+  const size_t got = std::fread(head, 1, sizeof head, f.get());
   std::string text;
-  try {
-    text = detail::read_file_bytes(path);
-  } catch (const InputError&) {
-    return {};
-  }
-  if (text.size() >= 20 && std::memcmp(text.data(), "glTF", 4) == 0) {
+  if (got == sizeof head && std::memcmp(head, "glTF", 4) == 0) {
     uint32_t length = 0;
-    std::memcpy(&length, text.data() + 12, 4);
-    if (std::memcmp(text.data() + 16, "JSON", 4) != 0 || length > text.size() - 20) return {};
-    text = text.substr(20, length);
+    std::memcpy(&length, head + 12, 4);
+    if (std::memcmp(head + 16, "JSON", 4) != 0 || length > size - sizeof head) return {};
+    text.resize(length);
+    if (std::fread(text.data(), 1, length, f.get()) != length) return {};
+  } else {
+    text.assign(head, got);
+    char buf[1 << 16];
+    for (size_t n; (n = std::fread(buf, 1, sizeof buf, f.get())) > 0;) text.append(buf, n);
   }
   const nlohmann::json root = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
   std::vector<std::string> files;

@@ -235,6 +235,13 @@ TEST_F(BadInputCli, OutputThatIsAnInputIsRefusedAndTheInputKept) {
   expect_rejected("run --scene " + gltf + " --schemes bvh_single --csv " + buffer,
                   {"--csv", "external file", "same file"});
   expect_rejected("rays --scene " + gltf + " --workload primary --out " + buffer, {"--out", "external file"});
+  // The same JSON as a .glb's JSON chunk (only the header and that chunk are read for the check).
+  std::string json = read("ext.gltf");
+  json.resize((json.size() + 3) / 4 * 4, ' ');
+  const uint32_t head[5] = {0x46546C67u /* glTF */, 2, uint32_t(20 + json.size()), uint32_t(json.size()), 0x4E4F534Au /* JSON */};
+  std::string glb(reinterpret_cast<const char*>(head), sizeof head);
+  const std::string glb_path = write("ext.glb", glb + json);
+  expect_rejected("rays --scene " + glb_path + " --workload primary --out " + buffer, {"--out", "external file"});
   EXPECT_EQ(read("tri angle.bin"), positions);
 
   const std::string a = run_csv("a.csv"), b = run_csv("b.csv");
