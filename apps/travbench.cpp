@@ -101,11 +101,11 @@ void check_files(const std::vector<FileArg>& inputs, const std::vector<FileArg>&
 std::vector<FileArg> scene_inputs(const std::string& scene_arg) {
   std::vector<FileArg> in;
   if (const std::string file = scene_file_of(scene_arg); !file.empty())
-    for (const std::string& f : scene_file_inputs(file))
-      in.push_back({f == file                                       ? "--scene"
-                    : std::filesystem::path(f).filename() == "scenes.json" ? "the scene's views file"
-                                                                    : "the scene's external file",
-                    f});
+    for (const SceneFileInput& f : scene_file_inputs(file))
+      in.push_back({f.role == SceneFileInput::Role::scene   ? "--scene"
+                    : f.role == SceneFileInput::Role::views ? "the scene's views file"
+                                                            : "the scene's external file",
+                    f.path});
   return in;
 }
 

@@ -238,14 +238,15 @@ std::vector<std::string> gltf_external_files(const std::string& path) {
 
 }  // namespace
 
-std::vector<std::string> scene_file_inputs(const std::string& path) {
-  std::vector<std::string> files = {path};
+std::vector<SceneFileInput> scene_file_inputs(const std::string& path) {
+  using Role = SceneFileInput::Role;
+  std::vector<SceneFileInput> files = {{path, Role::scene}};
   const fs::path json = scenes_json_of(path);
   std::error_code ec;
-  if (fs::is_regular_file(json, ec)) files.push_back(json.string());
+  if (fs::is_regular_file(json, ec)) files.push_back({json.string(), Role::views});
   const std::string ext = lower_extension(path);
   if (ext == ".gltf" || ext == ".glb")
-    for (std::string& f : gltf_external_files(path)) files.push_back(std::move(f));
+    for (std::string& f : gltf_external_files(path)) files.push_back({std::move(f), Role::external});
   return files;
 }
 

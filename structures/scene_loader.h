@@ -27,8 +27,13 @@ bool has_scene_file_extension(const std::string& path);
 void check_scene_file(const std::string& path);
 // The files loading the scene file `path` reads as a whole: the file, the scenes.json beside
 // it when there is one (its camera views), and a glTF file's external buffers and images. What a
-// command must not write over.
-std::vector<std::string> scene_file_inputs(const std::string& path);
+// command must not write over; `role` says which of the three each is (for the refusal's message).
+struct SceneFileInput {
+  enum class Role { scene, views, external };
+  std::string path;
+  Role role;
+};
+std::vector<SceneFileInput> scene_file_inputs(const std::string& path);
 
 // The views that the scenes.json in the scene file's directory lists for that file (named view1,
 // view2, ...); empty when there is no scenes.json or no entry with views for the file. A scenes.json

@@ -243,6 +243,16 @@ TEST_F(BadInputCli, OutputThatIsAnInputIsRefusedAndTheInputKept) {
   const std::string glb_path = write("ext.glb", glb + json);
   expect_rejected("rays --scene " + glb_path + " --workload primary --out " + buffer, {"--out", "external file"});
   EXPECT_EQ(read("tri angle.bin"), positions);
+  // A buffer whose file happens to be called scenes.json (in another directory than the scene's
+  // views file) is named as the external file it is: the loader says which role each input has.
+  fs::create_directories(dir_ / "sub");
+  write("sub/scenes.json", positions);
+  std::string sub_json = read("ext.gltf");
+  sub_json.replace(sub_json.find("tri%20angle.bin"), 15, "sub/scenes.json");
+  const std::string sub_gltf = write("sub_ext.gltf", sub_json);
+  expect_rejected("rays --scene " + sub_gltf + " --workload primary --out " + path("sub/scenes.json"),
+                  {"--out", "external file"});
+  EXPECT_EQ(read("sub/scenes.json"), positions);
 
   const std::string a = run_csv("a.csv"), b = run_csv("b.csv");
   const std::string a_bytes = read("a.csv");
