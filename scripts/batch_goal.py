@@ -23,7 +23,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from single_ray_goal import ROOT, default_scenes, div, fmt_rounds, print_table, run_sized, scene_label  # noqa: E402
+from single_ray_goal import add_common_args, default_scenes, div, fmt_rounds, print_table, run_sized, scene_label  # noqa: E402
 
 # cwbvh_single is a single-ray scheme too, and the fastest one on bounce rays of trees beyond the
 # last-level cache (spheres:1M and 2M; docs/PERFORMANCE.md, session 22).
@@ -34,18 +34,10 @@ ARCHITECTURAL = {"sponza", "crytek_sponza_partial", "sibenik", "sibenik_lucy", "
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--reps", type=int, default=5)
-    ap.add_argument("--small", type=int, default=50000, help="fewer rays than this: re-run with --small-reps")
-    ap.add_argument("--small-reps", type=int, default=31)
-    ap.add_argument("--size", type=int, default=512, help="image width and height")
+    add_common_args(ap, "/tmp/batch_goal")
     ap.add_argument("--scenes", default=",".join(default_scenes()))
-    ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
-    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
-    ap.add_argument("--out", default="/tmp/batch_goal")
     ap.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
                     help="a scheme parameter for every run (repeatable), e.g. task_order=sum")
-    ap.add_argument("--markdown", action="store_true", help="print a markdown table")
     args = ap.parse_args()
     args.workloads = "bounce:3"
     if args.rounds < 1 or args.reps < 1 or args.small_reps < 1:

@@ -24,7 +24,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from single_ray_goal import ROOT, default_scenes, div, fmt_rounds, print_table, run, scene_label  # noqa: E402
+from single_ray_goal import ISAS, add_common_args, default_scenes, div, fmt_rounds, print_table, run, scene_label  # noqa: E402
 
 SINGLE = ("mbvh8_single", "embree_single")
 HELDOUT = "/tmp/heldout/heldout.obj"
@@ -32,17 +32,11 @@ HELDOUT = "/tmp/heldout/heldout.obj"
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--reps", type=int, default=7)
-    ap.add_argument("--size", type=int, default=512, help="image width and height")
+    add_common_args(ap, "/tmp/packet_goal", reps=7, small=False)
     extra = [HELDOUT] if os.path.exists(HELDOUT) else []
     ap.add_argument("--scenes", default=",".join(default_scenes() + extra))
     ap.add_argument("--schemes", default="mbvh8_packet,bvh_ranged", help="the packet schemes; the fastest is 'best'")
-    ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
-    ap.add_argument("--isa", default="default", choices=["default", "avx2", "avx512", "avx", "sse4.2", "sse2"])
-    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
-    ap.add_argument("--out", default="/tmp/packet_goal")
-    ap.add_argument("--markdown", action="store_true", help="print a markdown table")
+    ap.add_argument("--isa", default="default", choices=ISAS)
     args = ap.parse_args()
     args.workloads = "primary"
     packets = [k for k in args.schemes.split(",") if k]

@@ -110,22 +110,33 @@ def print_table(head, rows, markdown):
         print("| " + " | ".join(vals) + " |" if markdown else "  ".join(f"{v:<28}" for v in vals))
 
 
+ISAS = ["default", "avx2", "avx512", "avx", "sse4.2", "sse2"]
+
+
+def add_common_args(ap, out, reps=5, small=True):
+    """The options every goal script takes: rounds and repetitions, the image size, the binary, the
+    CPU to pin to, the output folder and the table format (small: re-run small ray sets with more
+    repetitions)."""
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--reps", type=int, default=reps)
+    if small:
+        ap.add_argument("--small", type=int, default=50000, help="fewer rays than this: re-run with --small-reps")
+        ap.add_argument("--small-reps", type=int, default=31)
+    ap.add_argument("--size", type=int, default=512, help="image width and height")
+    ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
+    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
+    ap.add_argument("--out", default=out)
+    ap.add_argument("--markdown", action="store_true", help="print a markdown table")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--reps", type=int, default=5)
-    ap.add_argument("--small", type=int, default=50000, help="fewer rays than this: re-run with --small-reps")
-    ap.add_argument("--small-reps", type=int, default=31)
-    ap.add_argument("--size", type=int, default=512, help="image width and height")
+    add_common_args(ap, "/tmp/single_ray_goal")
     ap.add_argument("--workloads", default="primary,bounce:2")
-    ap.add_argument("--isa", default="default", choices=["default", "avx2", "avx512", "avx", "sse4.2", "sse2"])
+    ap.add_argument("--isa", default="default", choices=ISAS)
     ap.add_argument("--scenes", default=",".join(default_scenes()))
     ap.add_argument("--ours", default="mbvh8_single",
                     help="travbench single-ray schemes; per round and cell the fastest is ours")
-    ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
-    ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
-    ap.add_argument("--out", default="/tmp/single_ray_goal")
-    ap.add_argument("--markdown", action="store_true", help="print a markdown table")
     args = ap.parse_args()
     if args.rounds < 1 or args.reps < 1 or args.small_reps < 1:
         sys.exit("single_ray_goal: --rounds, --reps and --small-reps must be at least 1")
