@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <bit>
+#include <cassert>
 #include <limits>
 #include <chrono>
 #include <cmath>
+#include <span>
 
 #include "structures/box_simd.h"
 #include "structures/clip.h"
@@ -21,10 +23,12 @@ struct Split {
   AABB left, right;
 };
 
+// A node still to split: its references are arena_[off, off + count) (SpatialBuilder::run).
 struct Task {
   uint32_t node, depth;
-  std::vector<SpatialRef> refs;
+  size_t off, count;
 };
+using Refs = std::span<const SpatialRef>;
 
 // A SpatialRef's box as SSE registers (box_simd.h): unaligned loads inside the 28-byte record.
 // Lane 3 of lo is box.hi.x, which no result reads; lane 3 of hi would be the bits of `prim` (a
@@ -47,46 +51,67 @@ class SpatialBuilder {
         max_leaf_(uint32_t(std::max(1, p.max_leaf))),
         budget_(size_t(double(std::max(0.f, sp.budget)) * double(n))) {}
 
+  // The references of the nodes still to split live in one array, arena_, as a stack: the task
+  // on top of the task stack owns the top of the arena. A split writes the two children into the
+  // scratch arrays left_ and right_ and then over the parent's place, right below left (left is
+  // split next, right once left's subtree is done). Each node used to get two fresh arrays and
+  // free its parent's: every level of the tree faulted its references' pages in again (perf: page
+  // faults were ~15% of the spatial build's time on this VM, and its slow spells stretched them to
+  // ~40%, where Embree's build, which partitions one array in place, barely moved;
+  // docs/PERFORMANCE.md, session 28). The arena holds at most the references not yet placed in a
+  // leaf, so every reference once plus the duplicates, which the budget bounds; the same
+  // references in the same order as before, so the same tree.
   BVH run(std::vector<SpatialRef> refs) {
     BVH bvh;
     AABB root;
     for (const auto& r : refs) root.grow(r.box);
     mark_walls(refs, root);
     root_area_ = std::max(root.area(), 1e-30f);
+    const size_t n = refs.size();
+    // A leaf holds at least one reference, and a binary tree has 2 leaves - 1 nodes (+ node 1,
+    // unused): reserved once (untouched pages cost nothing) instead of a doubling series.
+    bvh.nodes.reserve(2 * (n + budget_) + 2);
     bvh.nodes.resize(2);
-    bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(refs.size())};
+    bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(n)};
     bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
-    bvh.prim_index.reserve(refs.size() + refs.size() / 4);
+    bvh.prim_index.reserve(n + n / 4);
+    arena_ = std::move(refs);
+    arena_.reserve(n + budget_ + 2);
     std::vector<Task> stack;
-    stack.push_back({0, 0, std::move(refs)});
+    stack.push_back({0, 0, 0, n});
     while (!stack.empty()) {
-      Task t = std::move(stack.back());
+      const Task t = stack.back();
       stack.pop_back();
+      assert(arena_.size() == t.off + t.count);  // the task owns the top of the arena
+      const Refs refs_t(arena_.data() + t.off, t.count);
       bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth);
       const AABB box{bvh.nodes[t.node].lo, bvh.nodes[t.node].hi};
-      if (t.refs.size() < size_t(std::max(sp_.min_refs, 2)) &&
-          (t.refs.size() < size_t(sp_.large_min_refs) || !has_large_ref(t.refs, box))) {
-        graft(bvh, t);
+      if (t.count < size_t(std::max(sp_.min_refs, 2)) &&
+          (t.count < size_t(sp_.large_min_refs) || !has_large_ref(refs_t, box))) {
+        graft(bvh, t, refs_t);
+        arena_.resize(t.off);
         continue;
       }
-      std::vector<SpatialRef> left, right;
+      left_.clear(), right_.clear();
       AABB lb, rb;
-      if (!split(t.refs, box, left, right, lb, rb)) {
-        BVHNode& n = bvh.nodes[t.node];
-        n.left_first = uint32_t(bvh.prim_index.size());
-        n.count = uint32_t(t.refs.size());
-        for (const auto& r : t.refs) bvh.prim_index.push_back(r.prim);
+      if (!split(refs_t, box, left_, right_, lb, rb)) {
+        BVHNode& nd = bvh.nodes[t.node];
+        nd.left_first = uint32_t(bvh.prim_index.size());
+        nd.count = uint32_t(t.count);
+        for (const auto& r : refs_t) bvh.prim_index.push_back(r.prim);
+        arena_.resize(t.off);
         continue;
       }
       const uint32_t l = uint32_t(bvh.nodes.size());
-      bvh.nodes.push_back({lb.lo, 0, lb.hi, uint32_t(left.size())});
-      bvh.nodes.push_back({rb.lo, 0, rb.hi, uint32_t(right.size())});
+      bvh.nodes.push_back({lb.lo, 0, lb.hi, uint32_t(left_.size())});
+      bvh.nodes.push_back({rb.lo, 0, rb.hi, uint32_t(right_.size())});
       bvh.nodes[t.node].left_first = l;
       bvh.nodes[t.node].count = 0;
-      t.refs.clear();
-      t.refs.shrink_to_fit();
-      stack.push_back({l + 1, t.depth + 1, std::move(right)});
-      stack.push_back({l, t.depth + 1, std::move(left)});
+      arena_.resize(t.off);  // the parent's references are no longer read
+      arena_.insert(arena_.end(), right_.begin(), right_.end());
+      arena_.insert(arena_.end(), left_.begin(), left_.end());
+      stack.push_back({l + 1, t.depth + 1, t.off, right_.size()});
+      stack.push_back({l, t.depth + 1, t.off + right_.size(), left_.size()});
     }
     return bvh;
   }
@@ -95,10 +120,10 @@ class SpatialBuilder {
   // Below min_refs references spatial splits gain little (Stich et al. §5: most of the SAH gain
   // is near the top), so the subtree comes from the project's fast binned builder over the same
   // references (BVH::build over a span), renumbered into this tree.
-  void graft(BVH& bvh, Task& t) {
+  void graft(BVH& bvh, const Task& t, Refs refs_t) {
     std::vector<PrimRef> refs;
-    refs.reserve(t.refs.size());
-    for (const auto& r : t.refs) refs.emplace_back(r.box, r.prim);
+    refs.reserve(refs_t.size());
+    for (const auto& r : refs_t) refs.emplace_back(r.box, r.prim);
     BVHBuildParams p = p_;
     p.threads = 1;
     const BVH sub = BVH::build(std::span<PrimRef>(refs), p);
@@ -118,7 +143,7 @@ class SpatialBuilder {
   // A reference longer than half the node on some axis: where big triangles meet small ones (a
   // ground quad isolated with a few walls by the object splits above) spatial splits keep paying
   // far below min_refs, so such subtrees are not handed off, down to large_min_refs.
-  static bool has_large_ref(const std::vector<SpatialRef>& refs, const AABB& box) {
+  static bool has_large_ref(Refs refs, const AABB& box) {
     const __m128 half = _mm_mul_ps(_mm_sub_ps(load_vec3(box.hi), load_vec3(box.lo)), _mm_set1_ps(0.5f));
     for (const auto& r : refs)
       if (_mm_movemask_ps(_mm_cmpgt_ps(_mm_sub_ps(ref_hi(r), ref_lo(r)), half)) & 7) return true;
@@ -126,8 +151,8 @@ class SpatialBuilder {
   }
 
   // Splits refs into left/right with their boxes, or returns false for a leaf.
-  bool split(std::vector<SpatialRef>& refs, const AABB& box, std::vector<SpatialRef>& left,
-             std::vector<SpatialRef>& right, AABB& lbox, AABB& rbox) {
+  bool split(Refs refs, const AABB& box, std::vector<SpatialRef>& left, std::vector<SpatialRef>& right, AABB& lbox,
+             AABB& rbox) {
     const uint32_t count = uint32_t(refs.size());
     if (count <= 1) return false;
     Split best = object_split(refs);
@@ -146,8 +171,8 @@ class SpatialBuilder {
     const float split_cost = p_.cost_traversal + p_.cost_intersect * best.cost / parent_area;
     const float leaf_cost = p_.cost_intersect * float(count);
     if (count <= max_leaf_ && (best.kind == Split::none || split_cost >= leaf_cost)) return false;
-    // Each side holds at most every reference once: one allocation each instead of a doubling
-    // series (allocation was a tenth of the build).
+    // Each side holds at most every reference once: no doubling series (the scratch arrays keep
+    // their capacity from node to node, so this allocates only while it grows).
     left.reserve(count);
     right.reserve(count);
     if (best.kind == Split::spatial) {
@@ -188,7 +213,7 @@ class SpatialBuilder {
     return true;
   }
 
-  static AABB bounds(const std::vector<SpatialRef>& refs) {
+  static AABB bounds(std::span<const SpatialRef> refs) {
     __m128 lo = _mm_set1_ps(INFINITY), hi = _mm_set1_ps(-INFINITY);
     for (const auto& r : refs) lo = grow_lo(lo, ref_lo(r)), hi = grow_hi(hi, ref_hi(r));
     return to_aabb(lo, hi);
@@ -200,7 +225,7 @@ class SpatialBuilder {
   // The same float operations as the scalar AABB code, so the same tree. With walls
   // (SpatialSplitParams::walls_apart), the first pass also forms the candidate "the node's
   // walls | the rest" (walls_), which the binned splits place by centroid among the rest.
-  Split object_split(const std::vector<SpatialRef>& refs) {
+  Split object_split(Refs refs) {
     Split best;
     const size_t n = refs.size();
     const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY), half = _mm_set1_ps(0.5f);
@@ -334,7 +359,7 @@ class SpatialBuilder {
 
   // SpatialSplitParams::wall: the triangles whose (starting) box spans `wall` of the root's
   // extent on two axes, flagged by triangle id.
-  void mark_walls(const std::vector<SpatialRef>& refs, const AABB& root) {
+  void mark_walls(Refs refs, const AABB& root) {
     if (!(sp_.wall > 0.f)) return;
     wall_.assign(scene_.num_triangles(), 0);
     const Vec3 n = root.extent() * sp_.wall;
@@ -346,7 +371,7 @@ class SpatialBuilder {
   bool is_wall(const SpatialRef& r) const { return !wall_.empty() && wall_[r.prim]; }
   // Chopped binning (Stich et al. §4.1): a reference enters its first bin and exits its last;
   // in every bin it spans it adds the bounds of its part clipped to that bin.
-  Split spatial_split(const std::vector<SpatialRef>& refs, const AABB& box) {
+  Split spatial_split(Refs refs, const AABB& box) {
     Split best;
     for (int a = 0; a < 3; ++a) {
       if (!(box.hi[a] - box.lo[a] > 0.f)) continue;
@@ -361,7 +386,7 @@ class SpatialBuilder {
   // The boxes of references inside one bin grow the SSE bin boxes; the chopped parts grow parts_
   // (chop_triangle_bounds grows an AABB array), joined to the bins at the end.
   template <int A>
-  void spatial_bins(const std::vector<SpatialRef>& refs, const AABB& box) {
+  void spatial_bins(Refs refs, const AABB& box) {
     const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY);
     uint32_t *count = scount_, *exits = sexit_;
     std::fill(count, count + sbins_, 0u);
@@ -398,12 +423,13 @@ class SpatialBuilder {
 
   // Distributes references for a spatial split; a straddling reference is split, or kept whole on
   // one side when that is cheaper ("reference unsplitting", Stich et al. §4.2).
-  void do_spatial(const std::vector<SpatialRef>& refs, const AABB& box, const Split& s, std::vector<SpatialRef>& left,
+  void do_spatial(Refs refs, const AABB& box, const Split& s, std::vector<SpatialRef>& left,
                   std::vector<SpatialRef>& right) {
     const int a = s.axis;
     const float x = plane(box, a, s.pos);
     AABB lb, rb;
-    std::vector<const SpatialRef*> straddle;
+    std::vector<const SpatialRef*>& straddle = straddle_;  // kept from node to node, as run's arrays
+    straddle.clear();
     const AxisBins ab(*this, box, a);
     for (const auto& r : refs) {
       if (is_wall(r)) {  // the side of its centroid's bin, as binned
@@ -424,7 +450,8 @@ class SpatialBuilder {
     }
     // Counts and boxes as if every straddler were split, then each straddler decides.
     float nl = float(left.size() + straddle.size()), nr = float(right.size() + straddle.size());
-    std::vector<AABB> lparts(straddle.size()), rparts(straddle.size());
+    std::vector<AABB>&lparts = lparts_, &rparts = rparts_;
+    lparts.resize(straddle.size()), rparts.resize(straddle.size());
     for (size_t i = 0; i < straddle.size(); ++i) {
       split_ref(*straddle[i], a, x, lparts[i], rparts[i]);
       lb.grow(lparts[i]);
@@ -482,6 +509,10 @@ class SpatialBuilder {
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;
   std::vector<BinBox> right_box_;
+  std::vector<SpatialRef> arena_;         // run: the references of the nodes still to split
+  std::vector<SpatialRef> left_, right_;  // run: a split's children, before they go to the arena
+  std::vector<const SpatialRef*> straddle_;  // do_spatial: the references across the plane
+  std::vector<AABB> lparts_, rparts_;        // ... and their parts on either side
 };
 
 }  // namespace
@@ -492,6 +523,7 @@ BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BV
   const size_t n = refs.size();
   BVH bvh = SpatialBuilder(scene, params, sp, n).run(std::move(refs));
   move_to_huge_pages(bvh.nodes);
+  bvh.nodes.shrink_to_fit();  // below 2 MiB the copy above is skipped: drop run's reserve
   bvh.finish_stats(params, t0);
   return bvh;
 }
