@@ -16,6 +16,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "harness/compare.h"
 #include "harness/records.h"
 #include "harness/sweep.h"
 #include "test_util.h"
@@ -65,6 +66,33 @@ TEST(CLI, RunWritesRequiredColumnsForEveryScheme) {
   for (std::string line; std::getline(f, line);) ++rows;
   EXPECT_EQ(rows, int(2 * schemes().size()));
   EXPECT_TRUE(std::filesystem::exists(dir / "out.json"));
+  std::filesystem::remove_all(dir);
+}
+
+// The build table counts the pages each structure's build faulted in (median over the reps) beside
+// its CPU time, which includes the kernel's time for those faults (docs/PERFORMANCE.md, session 28).
+TEST(CLI, BuildTableCountsEachBuildsPageFaults) {
+  const auto dir = test::temp_dir("cli_build");
+  const std::string csv = (dir / "build.csv").string();
+  const Result r = travbench("table build --scene sphere --schemes bvh_single,mbvh8_single --reps 1 --csv " + csv);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const CsvTable t = read_csv(csv);
+  const int structure = t.column("structure"), faults = t.column("build_page_faults"), cpu = t.column("build_cpu_ms");
+  ASSERT_GE(faults, 0);
+  ASSERT_GE(structure, 0);
+  std::set<std::string> counted;
+  for (size_t i = 0; i < t.rows.size(); ++i) {
+    const std::string& name = t.at(i, structure);
+    if (name.rfind("two-level", 0) == 0) continue;  // Table 1's rows time frames, not one structure
+    const std::optional<double> n = parse_number(t.at(i, faults));
+    ASSERT_TRUE(n) << name << ": '" << t.at(i, faults) << "'";
+    EXPECT_GE(*n, 0) << name;
+    EXPECT_EQ(*n, std::floor(*n)) << name;
+    EXPECT_TRUE(parse_number(t.at(i, cpu))) << name;
+    counted.insert(name);
+  }
+  EXPECT_EQ(counted, (std::set<std::string>{"bvh_single", "mbvh8_single", "embree low", "embree medium", "embree high",
+                                            "embree high fast"}));
   std::filesystem::remove_all(dir);
 }
 
