@@ -104,10 +104,15 @@ class Collapser {
   // The SAH collapse. F(n, j): the least cost of binary subtree n as a forest of at most j roots
   // in the wide tree; F(n, 1) = min(leaf cost, node cost); a node costs its area plus the best
   // split of its N slots between its two binary children (D(n, N)); F(n, j > 1) may dissolve n
-  // into its children's forests (D(n, j)). Children before parents: reverse pre-order.
+  // into its children's forests (D(n, j)). Children before parents: reverse pre-order, in which
+  // a node's F is read only by its parent, right after the parent's other child's subtree, so the F
+  // of the nodes whose parent is still to come form a stack (the last two on it are a parent's
+  // children): a tree's depth of entries instead of one per binary node (72 bytes each, pages the
+  // build faulted in: docs/PERFORMANCE.md, session 28). The same values, so the same tree.
   void optimise() {
     const size_t nb = bvh_.nodes.size();
-    F_.assign(nb, {});
+    std::vector<std::array<double, N + 1>>& fs = fstack_;
+    fs.clear();
     split_.assign(nb, {});
     leaf_.assign(nb, 0);
     node_split_.assign(nb, 1);
@@ -121,18 +126,26 @@ class Collapser {
       const double blocks = count_[n] <= out_.small_leaf ? 0.5 : double((count_[n] + W - 1) / W);
       const double leaf_cost =
           count_[n] <= max_leaf || bn.is_leaf() ? area * (ci * blocks + cp * charged_tris(n, area)) : INFINITY;
-      auto& F = F_[n];
+      std::array<double, N + 1> F{};
       if (bn.is_leaf()) {
         leaf_[n] = 1;
         for (int j = 1; j <= N; ++j) F[j] = leaf_cost;
+        fs.push_back(F);
         continue;
       }
-      const uint32_t l = bn.left_first, r = bn.left_first + 1;
+      // The children's F: range()'s pre-order visits the right child's subtree first, so in
+      // reverse the left child's F is pushed first and the right child's is on top. A node without
+      // children (the root of an empty tree) reads zeros, as the per-node table it replaced did.
+      std::array<double, N + 1> Fl{}, Fr{};
+      if (bn.left_first != 0) {
+        Fr = fs.back(), fs.pop_back();
+        Fl = fs.back(), fs.pop_back();
+      }
       double D[N + 1];
       for (int j = 2; j <= N; ++j) {
         D[j] = INFINITY;
         for (int kk = 1; kk < j; ++kk) {
-          const double c = F_[l][kk] + F_[r][j - kk];
+          const double c = Fl[kk] + Fr[j - kk];
           if (c < D[j]) D[j] = c, split_[n][j] = uint8_t(kk);
         }
       }
@@ -148,6 +161,7 @@ class Collapser {
           split_[n][j] = 0;  // keep n as one root
         }
       }
+      fs.push_back(F);
     }
   }
   // The triangles of subtree n that prim_cost charges as one leaf of surface area `area`: all of
@@ -279,7 +293,7 @@ class Collapser {
   MBVH<N, W>& out_;
   std::vector<uint32_t> first_, count_, order_;
   std::vector<uint32_t> leaf_tris_;  // the distinct triangles of the leaf being packed
-  std::vector<std::array<double, N + 1>> F_;
+  std::vector<std::array<double, N + 1>> fstack_;  // optimise: F of the nodes whose parent is to come
   std::vector<std::array<uint8_t, N + 1>> split_;
   std::vector<uint8_t> leaf_, node_split_;
   double leaf_depth_sum_ = 0;
