@@ -29,6 +29,7 @@ struct Task {
   size_t off, count;
 };
 using Refs = std::span<const SpatialRef>;
+using RefArray = aligned_vector<SpatialRef>;
 
 // A SpatialRef's box as SSE registers (box_simd.h): unaligned loads inside the 28-byte record.
 // Lane 3 of lo is box.hi.x, which no result reads; lane 3 of hi would be the bits of `prim` (a
@@ -75,8 +76,15 @@ class SpatialBuilder {
     bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(n)};
     bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
     bvh.prim_index.reserve(n + n / 4);
-    arena_ = std::move(refs);
-    arena_.reserve(n + budget_ + 2);
+    // The arena and the scratch arrays are written over and over: on huge pages (structures/aligned.h)
+    // they fault in 2 MiB at a time, unlike a builder's short-lived temporaries (session 15):
+    // crytek, conference and sibenik_lucy 2.2-3.5 k fewer faults and 2-6% less process time
+    // (3 interleaved runs each; docs/PERFORMANCE.md, session 28).
+    reserve_on_huge_pages(arena_, n + budget_ + 2);
+    arena_.assign(refs.begin(), refs.end());
+    refs = {};
+    reserve_on_huge_pages(left_, n);
+    reserve_on_huge_pages(right_, n);
     std::vector<Task> stack;
     stack.push_back({0, 0, 0, n});
     while (!stack.empty()) {
@@ -151,7 +159,7 @@ class SpatialBuilder {
   }
 
   // Splits refs into left/right with their boxes, or returns false for a leaf.
-  bool split(Refs refs, const AABB& box, std::vector<SpatialRef>& left, std::vector<SpatialRef>& right, AABB& lbox,
+  bool split(Refs refs, const AABB& box, RefArray& left, RefArray& right, AABB& lbox,
              AABB& rbox) {
     const uint32_t count = uint32_t(refs.size());
     if (count <= 1) return false;
@@ -423,8 +431,7 @@ class SpatialBuilder {
 
   // Distributes references for a spatial split; a straddling reference is split, or kept whole on
   // one side when that is cheaper ("reference unsplitting", Stich et al. §4.2).
-  void do_spatial(Refs refs, const AABB& box, const Split& s, std::vector<SpatialRef>& left,
-                  std::vector<SpatialRef>& right) {
+  void do_spatial(Refs refs, const AABB& box, const Split& s, RefArray& left, RefArray& right) {
     const int a = s.axis;
     const float x = plane(box, a, s.pos);
     AABB lb, rb;
@@ -509,8 +516,8 @@ class SpatialBuilder {
   std::vector<float> right_area_;
   std::vector<uint32_t> right_count_;
   std::vector<BinBox> right_box_;
-  std::vector<SpatialRef> arena_;         // run: the references of the nodes still to split
-  std::vector<SpatialRef> left_, right_;  // run: a split's children, before they go to the arena
+  RefArray arena_;         // run: the references of the nodes still to split
+  RefArray left_, right_;  // run: a split's children, before they go to the arena
   std::vector<const SpatialRef*> straddle_;  // do_spatial: the references across the plane
   std::vector<AABB> lparts_, rparts_;        // ... and their parts on either side
 };
