@@ -61,11 +61,17 @@ struct Timing {
 // fresh memory: the structures of earlier reps are kept), which on a virtual machine can cost
 // microseconds each and move with the host: `build_page_faults` says how much of a build is
 // exposed to that (docs/PERFORMANCE.md, session 28).
-template <class F>
-Timing median_ms(int reps, F&& f) {
+// warm (table build's `warm` parameter): one untimed build first, and before each timed build
+// `release` frees the previous one, outside the timer, so every timed build reuses memory the
+// allocator already holds, as a per-frame rebuild does. Otherwise the builds are kept until all
+// are timed and each writes memory it has not touched before (the faults of `build_page_faults`).
+template <class F, class R>
+Timing median_ms(int reps, F&& f, R&& release, bool warm) {
   std::vector<double> wall, cpu;
   std::vector<long> faults;
+  if (warm) f(), release();
   for (int r = 0; r < std::max(1, reps); ++r) {
+    if (warm && r > 0) release();
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = process_cpu_ms();
     const long f0 = process_page_faults();
@@ -78,6 +84,10 @@ Timing median_ms(int reps, F&& f) {
   std::sort(cpu.begin(), cpu.end());
   std::sort(faults.begin(), faults.end());
   return {wall[wall.size() / 2], cpu[cpu.size() / 2], faults[faults.size() / 2]};
+}
+template <class F>
+Timing median_ms(int reps, F&& f) {
+  return median_ms(reps, f, [] {}, false);
 }
 
 // The first n triangles of a mesh, its vertices compacted: a piece of the model of the size a
@@ -162,7 +172,16 @@ int build_table(const TableOptions& opt) {
   if (opt.run.reps > 5)
     throw InputError("table build takes --reps 1..5 (each repetition rebuilds every structure), not " +
                      std::to_string(opt.run.reps));
-  const std::vector<std::string> names = default_schemes(opt);
+  const ParamSpecs table_params = {bool_param(
+      "warm", false,
+      "time the structure builds in a warm process: one untimed build of each first, and each timed build's "
+      "predecessor freed before its timer starts, so every build reuses memory the allocator holds (as a per-frame "
+      "rebuild does); 0: a structure's timed builds are kept until all are timed and each faults in fresh memory "
+      "(Embree's rows, which run last, may still reuse memory freed by the rows before them)")};
+  const std::vector<std::string> names = default_schemes(opt, {}, table_params);
+  const auto warm_it = opt.run.scheme_config.params.find("warm");
+  const bool warm = param_to_bool(warm_it != opt.run.scheme_config.params.end() ? warm_it->second
+                                                                                 : find_param(table_params, "warm")->fallback);
   for (const auto& name : names)
     if (!opt.run.schemes.empty() && find_scheme(name).baseline)
       throw InputError("table build does not take --schemes " + name + ": it times our schemes' structure builds; "
@@ -225,15 +244,19 @@ int build_table(const TableOptions& opt) {
     // Embree's alike (freeing a structure is not part of a build).
     std::vector<std::unique_ptr<StructureCache>> caches;
     std::vector<std::unique_ptr<Traverser>> built;
-    const Timing ms = median_ms(reps, [&] {
-      caches.push_back(std::make_unique<StructureCache>(scene));
-      built.push_back(make_scheme(name, config_for(name, opt.run.scheme_config)));
-      built.back()->prepare(scene, *caches.back());
-    });
+    const Timing ms = median_ms(
+        reps,
+        [&] {
+          caches.push_back(std::make_unique<StructureCache>(scene));
+          built.push_back(make_scheme(name, config_for(name, opt.run.scheme_config)));
+          built.back()->prepare(scene, *caches.back());
+        },
+        [&] { built.clear(), caches.clear(); }, warm);
     const Traverser* t = built.back().get();
     Record r;
     r.set("structure", name).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
     r.set("threads", 1).set("build_ms", ms.wall_ms).set("build_cpu_ms", ms.cpu_ms).set("build_page_faults", uint64_t(std::max(0L, ms.page_faults)));
+    r.set("warm", warm ? 1 : 0);
     r.set("bytes", uint64_t(t->structure_bytes()));
     r.set("info", t->structure_info());
     std::fprintf(stderr, "%-14s %s: %.1f ms  %s\n", name.c_str(), scene.name.c_str(), ms.wall_ms, t->structure_info().c_str());
@@ -252,10 +275,12 @@ int build_table(const TableOptions& opt) {
                                 EmbreeBuild{EmbreeQuality::high, false, "embree high fast"}}) {
     const char* qn = eb.name;
     std::vector<std::unique_ptr<EmbreeScene>> built;
-    const Timing ms = median_ms(reps, [&] { built.push_back(std::make_unique<EmbreeScene>(scene, eb.q, eb.robust)); });
+    const Timing ms = median_ms(
+        reps, [&] { built.push_back(std::make_unique<EmbreeScene>(scene, eb.q, eb.robust)); }, [&] { built.clear(); }, warm);
     Record r;
     r.set("structure", qn).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
     r.set("threads", 1).set("build_ms", ms.wall_ms).set("build_cpu_ms", ms.cpu_ms).set("build_page_faults", uint64_t(std::max(0L, ms.page_faults)));
+    r.set("warm", warm ? 1 : 0);
     r.set("bytes", uint64_t(built.back()->bytes().total()));
     std::fprintf(stderr, "%-14s %s: %.1f ms\n", qn, scene.name.c_str(), ms.wall_ms);
     records.push_back(std::move(r));

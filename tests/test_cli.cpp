@@ -93,6 +93,21 @@ TEST(CLI, BuildTableCountsEachBuildsPageFaults) {
   }
   EXPECT_EQ(counted, (std::set<std::string>{"bvh_single", "mbvh8_single", "embree low", "embree medium", "embree high",
                                             "embree high fast"}));
+  // `warm`: the column says how each row was timed (0 by default); the parameter is the build
+  // table's own, refused elsewhere and outside 0|1.
+  auto warm_values = [&](const std::string& path) {
+    const CsvTable w = read_csv(path);
+    std::set<std::string> v;
+    for (size_t i = 0; i < w.rows.size(); ++i)
+      if (w.at(i, w.column("structure")).rfind("two-level", 0) != 0) v.insert(w.at(i, w.column("warm")));
+    return v;
+  };
+  EXPECT_EQ(warm_values(csv), std::set<std::string>{"0"});
+  const std::string warm_csv = (dir / "warm.csv").string();
+  ASSERT_EQ(travbench("table build --scene sphere --schemes bvh_single --reps 2 --param warm=1 --csv " + warm_csv).code, 0);
+  EXPECT_EQ(warm_values(warm_csv), std::set<std::string>{"1"});
+  EXPECT_EQ(travbench("table build --scene sphere --reps 1 --param warm=2 --csv " + warm_csv).code, 2);
+  EXPECT_EQ(travbench("table bounce --scene sphere --reps 1 --param warm=1 --csv " + (dir / "b.csv").string()).code, 2);
   std::filesystem::remove_all(dir);
 }
 
