@@ -56,12 +56,14 @@ class SpatialBuilder {
   // on top of the task stack owns the top of the arena. A split writes the two children into the
   // scratch arrays left_ and right_ and then over the parent's place, right below left (left is
   // split next, right once left's subtree is done). Each node used to get two fresh arrays and
-  // free its parent's: every level of the tree faulted its references' pages in again (perf: page
-  // faults were ~15% of the spatial build's time on this VM, and its slow spells stretched them to
-  // ~40%, where Embree's build, which partitions one array in place, barely moved;
+  // free its parent's: every level of the tree faulted its references' pages in again (perf: ~15%
+  // of a crytek_sponza_partial build's samples in the page-fault path of this paravirtualised VM,
+  // whose cost per fault moves with the host; Embree's builders partition one array in place;
   // docs/PERFORMANCE.md, session 28). The arena holds at most the references not yet placed in a
-  // leaf, so every reference once plus the duplicates, which the budget bounds; the same
-  // references in the same order as before, so the same tree.
+  // leaf, so every reference once plus the duplicates, which the budget bounds (a vector that
+  // outgrows its reservation still works: tasks hold offsets); the same references in the same
+  // order as before, so the same tree. Peak memory: the arena and, at the root's split, two scratch
+  // arrays of up to n references each (28 bytes per reference).
   BVH run(std::vector<SpatialRef> refs) {
     BVH bvh;
     AABB root;
