@@ -179,9 +179,7 @@ int build_table(const TableOptions& opt) {
       "rebuild does); 0: a structure's timed builds are kept until all are timed and each faults in fresh memory "
       "(Embree's rows, which run last, may still reuse memory freed by the rows before them)")};
   const std::vector<std::string> names = default_schemes(opt, {}, table_params);
-  const auto warm_it = opt.run.scheme_config.params.find("warm");
-  const bool warm = param_to_bool(warm_it != opt.run.scheme_config.params.end() ? warm_it->second
-                                                                                 : find_param(table_params, "warm")->fallback);
+  const bool warm = param_to_bool(table_param(opt, table_params, "warm"));
   for (const auto& name : names)
     if (!opt.run.schemes.empty() && find_scheme(name).baseline)
       throw InputError("table build does not take --schemes " + name + ": it times our schemes' structure builds; "

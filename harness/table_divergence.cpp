@@ -44,12 +44,8 @@ int divergence_table(const TableOptions& table_opt) {
   const std::vector<std::string> scheme_names = default_schemes(
       opt, {"bvh_single", "bvh_masked", "bvh_ranged", "bvh_partition", "kd_packet", "mbvh4_single", "mbvh8_single",
             "mbvh_rs", "embree_packet8"}, table_params);
-  auto table_param = [&](const std::string& key) {
-    const auto it = opt.run.scheme_config.params.find(key);
-    return it != opt.run.scheme_config.params.end() ? it->second : find_param(table_params, key)->fallback;
-  };
-  const int tile = param_to_int(table_param("tile"));
-  const bool thesis_camera = table_param("camera") == "thesis";
+  const int tile = param_to_int(table_param(opt, table_params, "tile"));
+  const bool thesis_camera = table_param(opt, table_params, "camera") == "thesis";
   Bench bench(load_scene(table_scene(opt)));
   const std::string thesis_scene = thesis_scene_of(bench.scene().name);
   const ThesisTable thesis = load_thesis_table("table02-04_packet_divergence_cpu.csv");

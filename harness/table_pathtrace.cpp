@@ -158,10 +158,7 @@ int pathtrace_table(const TableOptions& opt) {
                 "independent renderings per cell (rmse: their mean, rmse_sd their spread; noise_rmse needs 2)"),
       int_param("ris_per_light", 2, 1, 16, "RIS candidates per light (thesis §6.4.2: two points on each light)")};
   const std::vector<std::string> names = default_schemes(opt, {"mbvh_rs"}, table_params);
-  auto table_param = [&](const std::string& key) {
-    const auto it = opt.run.scheme_config.params.find(key);
-    return param_to_int(it != opt.run.scheme_config.params.end() ? it->second : find_param(table_params, key)->fallback);
-  };
+  auto table_param = [&](const std::string& key) { return param_to_int(tb::table_param(opt, table_params, key)); };
   const uint32_t min_spp = uint32_t(table_param("min_spp")), max_spp = uint32_t(table_param("max_spp"));
   const uint32_t ref_spp = uint32_t(table_param("ref_spp")), seeds = uint32_t(table_param("seeds"));
   if (ref_spp % 2) throw InputError("table pathtrace: ref_spp must be even (the converged image is two halves)");

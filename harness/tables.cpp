@@ -45,6 +45,11 @@ std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<st
   return names;
 }
 
+std::string table_param(const TableOptions& opt, const ParamSpecs& table_params, const std::string& key) {
+  const auto it = opt.run.scheme_config.params.find(key);
+  return it != opt.run.scheme_config.params.end() ? it->second : find_param(table_params, key)->fallback;
+}
+
 SchemeConfig table_scheme_config(const std::string& entry, const SchemeConfig& run_cfg, OwnTriangleTest own) {
   SchemeConfig cfg = config_for(entry, run_cfg);
   if (own == OwnTriangleTest::keep && !find_scheme(entry).kernels) cfg.kernel = TriKernel::watertight;

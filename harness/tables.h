@@ -38,6 +38,9 @@ enum class OwnTriangleTest { refuse, keep };
 std::vector<std::string> default_schemes(const TableOptions& opt, std::vector<std::string> fallback = {},
                                          const ParamSpecs& table_params = {},
                                          OwnTriangleTest own = OwnTriangleTest::refuse);
+// A table's own parameter `key` (one of the table_params given to default_schemes): its --param
+// value, else its default.
+std::string table_param(const TableOptions& opt, const ParamSpecs& table_params, const std::string& key);
 // The configuration a table's cell makes scheme `entry` with: config_for, and the kernel rule above.
 SchemeConfig table_scheme_config(const std::string& entry, const SchemeConfig& run_cfg, OwnTriangleTest own);
 // The scene a table runs on: --scene, else the built-in room.

@@ -213,9 +213,12 @@ std::vector<std::string> gltf_external_files(const std::string& path) {
     text.resize(length);
     if (std::fread(text.data(), 1, length, f.get()) != length) return {};
   } else {
-    text.assign(head, got);
-    char buf[1 << 16];
-    for (size_t n; (n = std::fread(buf, 1, sizeof buf, f.get())) > 0;) text.append(buf, n);
+    f.reset();
+    try {
+      text = detail::read_file_bytes(path);
+    } catch (const InputError&) {
+      return {};
+    }
   }
   const nlohmann::json root = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
   std::vector<std::string> files;
