@@ -79,10 +79,15 @@ struct Builder {
 
   Builder(const BVHBuildParams& p_, BVH& bvh_, PrimRef* refs_) : p(p_), bvh(bvh_), refs(refs_) {}
 
+  static int bins(const BVHBuildParams& p) { return std::clamp(p.bins, 2, 256); }
   void run(std::vector<BuildTask> stack, bool may_defer) {
-    const int nbins = std::clamp(p.bins, 2, 256);
+    BinSet bs(bins(p));
+    run(stack, may_defer, bs);
+  }
+  // The same with the caller's bins (BinSet(bins(p))), emptying the caller's stack.
+  void run(std::vector<BuildTask>& stack, bool may_defer, BinSet& bs) {
+    const int nbins = bins(p);
     const uint32_t max_leaf = uint32_t(std::max(1, p.max_leaf));
-    BinSet bs(nbins);
     const __m128 inf = _mm_set1_ps(INFINITY), ninf = _mm_set1_ps(-INFINITY);
     const __m128i maxbin = _mm_set1_epi32(nbins - 1), zero = _mm_setzero_si128();
     uint32_t local_depth = 0;
@@ -337,6 +342,43 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
 }
 
 }  // namespace
+
+struct BVHSubtreeBuilder::Scratch {
+  BinSet bins;
+  std::vector<BuildTask> stack;
+  explicit Scratch(const BVHBuildParams& p) : bins(Builder::bins(p)) {}
+};
+
+BVHSubtreeBuilder::BVHSubtreeBuilder(const BVHBuildParams& params) : params_(params) {
+  params_.threads = 1;
+  scratch_ = std::make_unique<Scratch>(params_);
+}
+BVHSubtreeBuilder::~BVHSubtreeBuilder() = default;
+
+uint32_t BVHSubtreeBuilder::build(BVH& bvh, uint32_t node, std::span<PrimRef> refs) {
+  const uint32_t n = uint32_t(refs.size()), prim_off = uint32_t(bvh.prim_index.size()),
+                 node_off = uint32_t(bvh.nodes.size());
+  // The root task's doubled-centroid bounds, as BVH::build(span) forms them.
+  __m128 cl = _mm_set1_ps(INFINITY), ch = _mm_set1_ps(-INFINITY);
+  for (const PrimRef& r : refs) {
+    const __m128 cen = _mm_add_ps(vlo(r), vhi(r));
+    cl = grow_lo(cl, cen), ch = grow_hi(ch, cen);
+  }
+  // The builder reads a node's references at left_first, an index into `refs`: the subtree's
+  // leaves are moved to prim_index's numbering once it is built.
+  bvh.nodes[node].left_first = 0;
+  bvh.nodes[node].count = n;
+  Builder b{params_, bvh, refs.data()};
+  b.grow_nodes = true;
+  b.next_node = node_off;
+  scratch_->stack.assign(1, BuildTask{cl, ch, node, 0});
+  b.run(scratch_->stack, false, scratch_->bins);
+  if (bvh.nodes[node].is_leaf()) bvh.nodes[node].left_first += prim_off;
+  for (size_t i = node_off; i < bvh.nodes.size(); ++i)
+    if (bvh.nodes[i].is_leaf()) bvh.nodes[i].left_first += prim_off;
+  for (const PrimRef& r : refs) bvh.prim_index.push_back(r.id());
+  return b.max_depth.load();
+}
 
 BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
   if (p.spatial) {

@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <span>
 #include <string>
 #include <thread>
@@ -102,6 +103,30 @@ struct BVH {
   // Fills `stats` from the finished tree, all but max_depth (which only the builder knows), the
   // build time counted from `start`: the last step of both builders (binned SAH, spatial splits).
   void finish_stats(const BVHBuildParams& params, std::chrono::steady_clock::time_point start);
+};
+
+// The same binned builder for many small subtrees of one tree under construction (the
+// spatial-split builder hands it every subtree below its min_refs, structures/bvh_spatial.cpp):
+// build() grows node `node` of `bvh` into the subtree of `refs` in place — its nodes appended to
+// bvh.nodes, whose capacity must hold them (a binary tree: < 2 refs.size() nodes), its ids
+// appended to bvh.prim_index — the same subtree, node for node, as BVH::build over the same
+// references would make and renumber, without that tree's allocations, copy and statistics
+// (which cost the spatial build of stadium ~10% of its instructions, 2.8 k subtrees of at
+// most 64 references; docs/PERFORMANCE.md, session 29). `node`'s box must be the references'
+// bounds. Single-threaded; the bins are kept from call to call. Returns the subtree's depth
+// below `node`.
+class BVHSubtreeBuilder {
+ public:
+  explicit BVHSubtreeBuilder(const BVHBuildParams& params);
+  ~BVHSubtreeBuilder();
+  BVHSubtreeBuilder(const BVHSubtreeBuilder&) = delete;
+  BVHSubtreeBuilder& operator=(const BVHSubtreeBuilder&) = delete;
+  uint32_t build(BVH& bvh, uint32_t node, std::span<PrimRef> refs);
+
+ private:
+  struct Scratch;
+  BVHBuildParams params_;
+  std::unique_ptr<Scratch> scratch_;
 };
 
 template <class BoxOf>

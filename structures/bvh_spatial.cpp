@@ -50,7 +50,7 @@ class SpatialBuilder {
       : scene_(scene), p_(p), sp_(sp), obins_(std::clamp(p.bins, 2, 256)),
         sbins_all_(std::clamp(sp.spatial_bins, 2, 256)), sbins_(sbins_all_),
         max_leaf_(uint32_t(std::max(1, p.max_leaf))),
-        budget_(size_t(double(std::max(0.f, sp.budget)) * double(n))) {}
+        budget_(size_t(double(std::max(0.f, sp.budget)) * double(n))), sub_(p) {}
 
   // The references of the nodes still to split live in one array, arena_, as a stack: the task
   // on top of the task stack owns the top of the arena. A split writes the two children into the
@@ -129,25 +129,13 @@ class SpatialBuilder {
  private:
   // Below min_refs references spatial splits gain little (Stich et al. §5: most of the SAH gain
   // is near the top), so the subtree comes from the project's fast binned builder over the same
-  // references (BVH::build over a span), renumbered into this tree.
+  // references, built in place under the task's node (BVHSubtreeBuilder: the tree BVH::build
+  // over them would give, renumbered).
   void graft(BVH& bvh, const Task& t, Refs refs_t) {
-    std::vector<PrimRef> refs;
-    refs.reserve(refs_t.size());
-    for (const auto& r : refs_t) refs.emplace_back(r.box, r.prim);
-    BVHBuildParams p = p_;
-    p.threads = 1;
-    const BVH sub = BVH::build(std::span<PrimRef>(refs), p);
-    const uint32_t node_off = uint32_t(bvh.nodes.size()) - 2, prim_off = uint32_t(bvh.prim_index.size());
-    auto renumber = [&](BVHNode n) {
-      n.left_first += n.is_leaf() ? prim_off : node_off;
-      return n;
-    };
-    const BVHNode root = renumber(sub.nodes[0]);
-    bvh.nodes[t.node].left_first = root.left_first;
-    bvh.nodes[t.node].count = root.count;
-    for (size_t i = 2; i < sub.nodes.size(); ++i) bvh.nodes.push_back(renumber(sub.nodes[i]));
-    bvh.prim_index.insert(bvh.prim_index.end(), sub.prim_index.begin(), sub.prim_index.end());
-    bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth + sub.stats.max_depth);
+    graft_refs_.clear();
+    for (const auto& r : refs_t) graft_refs_.emplace_back(r.box, r.prim);
+    const uint32_t depth = sub_.build(bvh, t.node, graft_refs_);
+    bvh.stats.max_depth = std::max(bvh.stats.max_depth, t.depth + depth);
   }
 
   // A reference longer than half the node on some axis: where big triangles meet small ones (a
@@ -520,6 +508,8 @@ class SpatialBuilder {
   std::vector<BinBox> right_box_;
   RefArray arena_;         // run: the references of the nodes still to split
   RefArray left_, right_;  // run: a split's children, before they go to the arena
+  BVHSubtreeBuilder sub_;               // graft: the binned builder of the small subtrees
+  std::vector<PrimRef> graft_refs_;     // ... and their references
   std::vector<const SpatialRef*> straddle_;  // do_spatial: the references across the plane
   std::vector<AABB> lparts_, rparts_;        // ... and their parts on either side
 };

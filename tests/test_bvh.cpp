@@ -188,6 +188,46 @@ TEST(BVH, SceneBuildIsTheSpanBuild) {
   }
 }
 
+// BVHSubtreeBuilder (the spatial-split builder's hand-off of small subtrees): each subtree built
+// in place under a node of a tree under construction is the span build of the same references,
+// node for node, its nodes and leaf ranges renumbered into the host tree; one builder serves many
+// subtrees in turn (its bins kept), of one, two and many references.
+TEST(BVH, SubtreeBuiltInPlaceIsTheSpanBuildRenumbered) {
+  const Scene s = make_builtin_scene("spheres:3000");
+  const BVHBuildParams p;
+  BVH host;
+  host.nodes.reserve(4 * s.num_triangles() + 8);
+  host.nodes.resize(2);
+  BVHSubtreeBuilder sub(p);
+  uint32_t t = 0;
+  for (uint32_t n : {1u, 2u, 3u, 40u, 63u, 500u, 7u}) {
+    std::vector<PrimRef> refs, copy;
+    AABB box;
+    for (uint32_t k = 0; k < n; ++k, ++t) refs.emplace_back(s.triangle_bounds(t), t), box.grow(s.triangle_bounds(t));
+    copy = refs;
+    const BVH expect = BVH::build(std::span<PrimRef>(copy), p);
+    // A host node holding the references, as a split leaves it (its box their bounds).
+    const uint32_t node = uint32_t(host.nodes.size());
+    host.nodes.push_back({box.lo, 0, box.hi, n});
+    const uint32_t node_off = uint32_t(host.nodes.size()), prim_off = uint32_t(host.prim_index.size());
+    const uint32_t depth = sub.build(host, node, refs);
+    EXPECT_EQ(depth, expect.stats.max_depth) << n;
+    ASSERT_EQ(host.nodes.size() - node_off, expect.nodes.size() - 2) << n;
+    const auto renumbered = [&](BVHNode e) {
+      e.left_first += e.is_leaf() ? prim_off : node_off - 2;
+      return e;
+    };
+    const auto same = [](const BVHNode& a, const BVHNode& b) {
+      return a.lo == b.lo && a.hi == b.hi && a.left_first == b.left_first && a.count == b.count;
+    };
+    EXPECT_TRUE(same(host.nodes[node], renumbered(expect.nodes[0]))) << n;
+    for (size_t i = 2; i < expect.nodes.size(); ++i)
+      EXPECT_TRUE(same(host.nodes[node_off + i - 2], renumbered(expect.nodes[i]))) << n << " node " << i;
+    ASSERT_EQ(host.prim_index.size(), prim_off + n);
+    EXPECT_TRUE(std::equal(expect.prim_index.begin(), expect.prim_index.end(), host.prim_index.begin() + prim_off)) << n;
+  }
+}
+
 TEST(BVH, SpanOfOneOrNoReferences) {
   std::vector<PrimRef> one{PrimRef(AABB{{1, 2, 3}, {4, 5, 6}}, 77)};
   const BVH b = BVH::build(std::span<PrimRef>(one));
