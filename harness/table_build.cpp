@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <memory>
 #include <thread>
+#include <malloc.h>
 #include <sys/resource.h>
 #include <vector>
 
@@ -63,8 +64,9 @@ struct Timing {
 // exposed to that (docs/PERFORMANCE.md, session 28).
 // warm (table build's `warm` parameter): one untimed build first, and before each timed build
 // `release` frees the previous one, outside the timer, so every timed build reuses memory the
-// allocator already holds, as a per-frame rebuild does. Otherwise the builds are kept until all
-// are timed and each writes memory it has not touched before (the faults of `build_page_faults`).
+// allocator already holds, as a per-frame rebuild does. Otherwise (cold) the builds are kept until
+// all are timed and the allocator's free memory is returned to the system before each, so each
+// writes memory it has not touched before (the faults of `build_page_faults`), ours and Embree's.
 template <class F, class R>
 Timing median_ms(int reps, F&& f, R&& release, bool warm) {
   std::vector<double> wall, cpu;
@@ -72,6 +74,13 @@ Timing median_ms(int reps, F&& f, R&& release, bool warm) {
   if (warm) f(), release();
   for (int r = 0; r < std::max(1, reps); ++r) {
     if (warm && r > 0) release();
+#if defined(__GLIBC__)
+    // Cold: the allocator's free memory goes back to the system first, so this build faults in
+    // every page it uses, whichever rows ran before it (without this, Embree's rows, which run
+    // last, built into memory our rows had freed: 0-15 faults against our 200-5000, a bias of up
+    // to 0.8x in the spatial-split ratio on small scenes; docs/PERFORMANCE.md, session 29).
+    if (!warm) malloc_trim(0);
+#endif
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = process_cpu_ms();
     const long f0 = process_page_faults();
@@ -172,14 +181,19 @@ int build_table(const TableOptions& opt) {
   if (opt.run.reps > 5)
     throw InputError("table build takes --reps 1..5 (each repetition rebuilds every structure), not " +
                      std::to_string(opt.run.reps));
-  const ParamSpecs table_params = {bool_param(
-      "warm", false,
-      "time the structure builds in a warm process: one untimed build of each first, and each timed build's "
-      "predecessor freed before its timer starts, so every build reuses memory the allocator holds (as a per-frame "
-      "rebuild does); 0: a structure's timed builds are kept until all are timed and each faults in fresh memory "
-      "(Embree's rows, which run last, may still reuse memory freed by the rows before them)")};
+  const ParamSpecs table_params = {
+      bool_param("warm", false,
+                 "time the structure builds in a warm process: one untimed build of each first, and each timed build's "
+                 "predecessor freed before its timer starts, so every build reuses memory the allocator holds (as a "
+                 "per-frame rebuild does); 0: a structure's timed builds are kept until all are timed and the "
+                 "allocator's free memory is returned to the system before each, so every build, ours and Embree's, "
+                 "faults in the memory it uses"),
+      bool_param("two_level", true,
+                 "the thesis' Table 1 rows (two-level BVHs of 4 objects, rebuild and refit, 44k-388k triangles; most "
+                 "of the table's time); 0: only the scheme and Embree rows (scripts/build_goal.py's rounds)")};
   const std::vector<std::string> names = default_schemes(opt, {}, table_params);
   const bool warm = param_to_bool(table_param(opt, table_params, "warm"));
+  const bool two_level = param_to_bool(table_param(opt, table_params, "two_level"));
   for (const auto& name : names)
     if (!opt.run.schemes.empty() && find_scheme(name).baseline)
       throw InputError("table build does not take --schemes " + name + ": it times our schemes' structure builds; "
@@ -200,6 +214,7 @@ int build_table(const TableOptions& opt) {
   // repetitions (a refit's work does not depend on where they are), and a rebuild frees the
   // previous frame's BVHs inside the timed step, as a per-frame rebuild does.
   for (const char* tris : {"44000", "88000", "388000"}) {
+    if (!two_level) break;
     Group g = make_group(size_t(std::stoul(tris)), opt.scene);
     TwoLevelBVH& tl = g.tl;
     for (bool spatial : {true, false}) {

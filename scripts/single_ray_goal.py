@@ -113,16 +113,17 @@ def print_table(head, rows, markdown):
 ISAS = ["default", "avx2", "avx512", "avx", "sse4.2", "sse2"]
 
 
-def add_common_args(ap, out, reps=5, small=True):
-    """The options every goal script takes: rounds and repetitions, the image size, the binary, the
-    CPU to pin to, the output folder and the table format (small: re-run small ray sets with more
-    repetitions)."""
+def add_common_args(ap, out, reps=5, small=True, size=True):
+    """The options every goal script takes: rounds and repetitions, the image size (size: for the
+    scripts that trace), the binary, the CPU to pin to, the output folder and the table format
+    (small: re-run small ray sets with more repetitions)."""
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=reps)
     if small:
         ap.add_argument("--small", type=int, default=50000, help="fewer rays than this: re-run with --small-reps")
         ap.add_argument("--small-reps", type=int, default=31)
-    ap.add_argument("--size", type=int, default=512, help="image width and height")
+    if size:
+        ap.add_argument("--size", type=int, default=512, help="image width and height")
     ap.add_argument("--travbench", default=os.path.join(ROOT, "build", "travbench"))
     ap.add_argument("--cpu", type=int, default=None, help="pin every process to this CPU (taskset -c)")
     ap.add_argument("--out", default=out)
