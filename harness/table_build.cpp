@@ -67,8 +67,13 @@ struct Timing {
 // allocator already holds, as a per-frame rebuild does. Otherwise (cold) the builds are kept until
 // all are timed and the allocator's free memory is returned to the system before each, so each
 // writes memory it has not touched before (the faults of `build_page_faults`), ours and Embree's.
+// Table 1's frames (the two-level rows) take neither: a frame's rebuild frees the previous frame's
+// structures inside its timed step, so the frames after the first run in memory the process holds,
+// as a renderer's frames do.
+enum class BuildMemory { frames, cold, warm };
 template <class F, class R>
-Timing median_ms(int reps, F&& f, R&& release, bool warm) {
+Timing median_ms(int reps, F&& f, R&& release, BuildMemory mem) {
+  const bool warm = mem == BuildMemory::warm;
   std::vector<double> wall, cpu;
   std::vector<long> faults;
   if (warm) f(), release();
@@ -79,7 +84,7 @@ Timing median_ms(int reps, F&& f, R&& release, bool warm) {
     // every page it uses, whichever rows ran before it (without this, Embree's rows, which run
     // last, built into memory our rows had freed: 0-15 faults against our 200-5000, a bias of up
     // to 0.8x in the spatial-split ratio on small scenes; docs/PERFORMANCE.md, session 29).
-    if (!warm) malloc_trim(0);
+    if (mem == BuildMemory::cold) malloc_trim(0);
 #endif
     const auto t0 = std::chrono::steady_clock::now();
     const double c0 = process_cpu_ms();
@@ -96,7 +101,7 @@ Timing median_ms(int reps, F&& f, R&& release, bool warm) {
 }
 template <class F>
 Timing median_ms(int reps, F&& f) {
-  return median_ms(reps, f, [] {}, false);
+  return median_ms(reps, f, [] {}, BuildMemory::frames);
 }
 
 // The first n triangles of a mesh, its vertices compacted: a piece of the model of the size a
@@ -193,6 +198,7 @@ int build_table(const TableOptions& opt) {
                  "of the table's time); 0: only the scheme and Embree rows (scripts/build_goal.py's rounds)")};
   const std::vector<std::string> names = default_schemes(opt, {}, table_params);
   const bool warm = param_to_bool(table_param(opt, table_params, "warm"));
+  const BuildMemory mem = warm ? BuildMemory::warm : BuildMemory::cold;
   const bool two_level = param_to_bool(table_param(opt, table_params, "two_level"));
   for (const auto& name : names)
     if (!opt.run.schemes.empty() && find_scheme(name).baseline)
@@ -264,7 +270,7 @@ int build_table(const TableOptions& opt) {
           built.push_back(make_scheme(name, config_for(name, opt.run.scheme_config)));
           built.back()->prepare(scene, *caches.back());
         },
-        [&] { built.clear(), caches.clear(); }, warm);
+        [&] { built.clear(), caches.clear(); }, mem);
     const Traverser* t = built.back().get();
     Record r;
     r.set("structure", name).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
@@ -289,7 +295,7 @@ int build_table(const TableOptions& opt) {
     const char* qn = eb.name;
     std::vector<std::unique_ptr<EmbreeScene>> built;
     const Timing ms = median_ms(
-        reps, [&] { built.push_back(std::make_unique<EmbreeScene>(scene, eb.q, eb.robust)); }, [&] { built.clear(); }, warm);
+        reps, [&] { built.push_back(std::make_unique<EmbreeScene>(scene, eb.q, eb.robust)); }, [&] { built.clear(); }, mem);
     Record r;
     r.set("structure", qn).set("scene", scene.name).set("triangles", uint64_t(scene.num_triangles()));
     r.set("threads", 1).set("build_ms", ms.wall_ms).set("build_cpu_ms", ms.cpu_ms).set("build_page_faults", uint64_t(std::max(0L, ms.page_faults)));
