@@ -312,7 +312,9 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c, CWSlots slots) {
       ASSERT_EQ(mbvh_ref::is_leaf(mr), mbvh_ref::is_leaf(cr));
       if (!mbvh_ref::is_leaf(mr)) {
         // The full nodes are a top: a compressed node has compressed children only.
-        if (!(ci & kCWFull)) ASSERT_FALSE(cr & kCWFull) << "a full node below a compressed one";
+        if (!(ci & kCWFull)) {
+          ASSERT_FALSE(cr & kCWFull) << "a full node below a compressed one";
+        }
         stack.push_back({mr, cr});
         continue;
       }
@@ -379,10 +381,14 @@ TEST(CWBVH, SameTreeConservativeBoxesAndCompressed) {
       check_full_top_is_largest(c);
       EXPECT_EQ(c.full.size(), size_t(std::floor(share * double(m.nodes.size()))));
       EXPECT_EQ(c.root, c.full.empty() ? 0u : kCWFull);
-      if (share <= 0.05) EXPECT_LE(double(c.stats.node_bytes), 0.35 * double(m.stats.node_bytes));
+      if (share <= 0.05) {
+        EXPECT_LE(double(c.stats.node_bytes), 0.35 * double(m.stats.node_bytes));
+      }
       EXPECT_EQ(c.stats.node_bytes, c.nodes.size() * sizeof(CWNode) + c.full.size() * sizeof(MBVHNode<8>));
       EXPECT_EQ(c.stats.blocks, m.blocks.size());
-      if (share < 1) EXPECT_LT(c.stats.box_growth, 0.2) << "quantized boxes far larger than the true ones";
+      if (share < 1) {
+        EXPECT_LT(c.stats.box_growth, 0.2) << "quantized boxes far larger than the true ones";
+      }
     }
   }
   EXPECT_THROW(CWBVH::compress(mbvh8_of(scenes[0]), 1.5), std::invalid_argument);
