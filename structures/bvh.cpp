@@ -299,10 +299,18 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
   // A binary tree over n leaves has < 2n nodes. A single-threaded build only reserves them and
   // grows the array pair by pair: value-initialising all 2n nodes up front touched (page-faulted
   // and zeroed) twice the memory the tree uses, ~10% of the build time on Sponza. Parallel
-  // builds claim pairs from several threads, so they need the whole array in place.
+  // builds claim pairs from several threads, so they need the whole array in place (and copy
+  // the used part onto huge pages at the end, freeing the rest). A single thread's reservation
+  // is on huge pages where it spans 2 MiB or more, so the tree is written where it stays instead
+  // of on 4 KiB pages and then copied: bvh_single's build 0.70-0.82x on 4 scenes, cold and warm
+  // (docs/PERFORMANCE.md, session 29); untouched, the rest of the reservation is address space.
   const int threads = std::max(1, p.threads);
   const size_t max_nodes = size_t(2) * std::max(n, 1u) + 2;
-  if (threads == 1) {
+  const bool in_place = threads == 1 && max_nodes * sizeof(BVHNode) >= kHugePageBytes;
+  if (in_place) {
+    reserve_on_huge_pages(bvh.nodes, max_nodes);
+    bvh.nodes.resize(2);
+  } else if (threads == 1) {
     bvh.nodes.reserve(max_nodes);
     bvh.nodes.resize(2);
   } else {
@@ -336,7 +344,7 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
   for (uint32_t i = 0; i < n; ++i) bvh.prim_index[i] = refs[i].id();
   bvh.nodes.resize(b.next_node.load());
   bvh.stats.max_depth = b.max_depth.load();
-  move_to_huge_pages(bvh.nodes);
+  if (!in_place) move_to_huge_pages(bvh.nodes);
   bvh.finish_stats(p, t0);
   return bvh;
 }

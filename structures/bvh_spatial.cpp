@@ -64,27 +64,37 @@ class SpatialBuilder {
   // outgrows its reservation still works: tasks hold offsets); the same references in the same
   // order as before, so the same tree. Peak memory: the arena and, at the root's split, two scratch
   // arrays of up to n references each (28 bytes per reference).
-  BVH run(std::vector<SpatialRef> refs) {
-    BVH bvh;
-    AABB root;
-    for (const auto& r : refs) root.grow(r.box);
-    mark_walls(refs, root);
-    root_area_ = std::max(root.area(), 1e-30f);
-    const size_t n = refs.size();
-    // A leaf holds at least one reference, and a binary tree has 2 leaves - 1 nodes (+ node 1,
-    // unused): reserved once (untouched pages cost nothing) instead of a doubling series.
-    bvh.nodes.reserve(2 * (n + budget_) + 2);
-    bvh.nodes.resize(2);
-    bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(n)};
-    bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
-    bvh.prim_index.reserve(n + n / 4);
+  // fill(arena_) appends the n starting references to the arena (reserved for them and the
+  // duplicates), so the scene's references are written there once, not first into an array of
+  // their own (session 29: that array was a tenth of a cold conference build's page faults).
+  template <class Fill>
+  BVH run(size_t n, const Fill& fill) {
     // The arena and the scratch arrays are written over and over: on huge pages (structures/aligned.h)
     // they fault in 2 MiB at a time, unlike a builder's short-lived temporaries (session 15):
     // crytek, conference and sibenik_lucy 2.2-3.5 k fewer faults and 2-6% less process time
     // (3 interleaved runs each; docs/PERFORMANCE.md, session 28).
     reserve_on_huge_pages(arena_, n + budget_ + 2);
-    arena_.assign(refs.begin(), refs.end());
-    refs = {};
+    fill(arena_);
+    assert(arena_.size() == n);
+    BVH bvh;
+    AABB root;
+    for (const auto& r : arena_) root.grow(r.box);
+    mark_walls(arena_, root);
+    root_area_ = std::max(root.area(), 1e-30f);
+    // A leaf holds at least one reference, and a binary tree has 2 leaves - 1 nodes (+ node 1,
+    // unused): reserved once (untouched pages cost nothing) instead of a doubling series, and on
+    // huge pages where that is 2 MiB or more, so the tree is written where it stays (the nodes
+    // used to be written on 4 KiB pages and then copied onto huge pages: a third of a cold
+    // conference build's faults; session 29). The reservation stays with the tree: untouched, it
+    // costs address space only.
+    const size_t max_nodes = 2 * (n + budget_) + 2;
+    nodes_on_huge_pages_ = max_nodes * sizeof(BVHNode) >= kHugePageBytes;
+    if (nodes_on_huge_pages_) reserve_on_huge_pages(bvh.nodes, max_nodes);
+    else bvh.nodes.reserve(max_nodes);
+    bvh.nodes.resize(2);
+    bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(n)};
+    bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
+    bvh.prim_index.reserve(n + n / 4);
     reserve_on_huge_pages(left_, n);
     reserve_on_huge_pages(right_, n);
     std::vector<Task> stack;
@@ -125,6 +135,7 @@ class SpatialBuilder {
     }
     return bvh;
   }
+  bool nodes_on_huge_pages() const { return nodes_on_huge_pages_; }
 
  private:
   // Below min_refs references spatial splits gain little (Stich et al. §5: most of the SAH gain
@@ -512,25 +523,41 @@ class SpatialBuilder {
   std::vector<PrimRef> graft_refs_;     // ... and their references
   std::vector<const SpatialRef*> straddle_;  // do_spatial: the references across the plane
   std::vector<AABB> lparts_, rparts_;        // ... and their parts on either side
+  bool nodes_on_huge_pages_ = false;         // run: the tree's nodes were reserved on huge pages
 };
+
+}  // namespace
+
+namespace {
+
+template <class Fill>
+BVH build_spatial(const Scene& scene, size_t n, const Fill& fill, const BVHBuildParams& params,
+                  const SpatialSplitParams& sp, std::chrono::steady_clock::time_point t0) {
+  SpatialBuilder builder(scene, params, sp, n);
+  BVH bvh = builder.run(n, fill);
+  if (!builder.nodes_on_huge_pages()) bvh.nodes.shrink_to_fit();  // a small tree: drop run's reserve
+  bvh.finish_stats(params, t0);
+  return bvh;
+}
 
 }  // namespace
 
 BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BVHBuildParams& params,
                       const SpatialSplitParams& sp) {
   const auto t0 = std::chrono::steady_clock::now();
-  const size_t n = refs.size();
-  BVH bvh = SpatialBuilder(scene, params, sp, n).run(std::move(refs));
-  move_to_huge_pages(bvh.nodes);
-  bvh.nodes.shrink_to_fit();  // below 2 MiB the copy above is skipped: drop run's reserve
-  bvh.finish_stats(params, t0);
-  return bvh;
+  return build_spatial(
+      scene, refs.size(), [&](RefArray& arena) { arena.assign(refs.begin(), refs.end()), refs = {}; }, params, sp, t0);
 }
 
 BVH build_spatial_bvh(const Scene& scene, const BVHBuildParams& params, const SpatialSplitParams& sp) {
-  std::vector<SpatialRef> refs(scene.num_triangles());
-  for (uint32_t i = 0; i < refs.size(); ++i) refs[i] = {scene.triangle_bounds(i), i};
-  return build_spatial_bvh(scene, std::move(refs), params, sp);
+  const auto t0 = std::chrono::steady_clock::now();
+  const uint32_t n = uint32_t(scene.num_triangles());
+  return build_spatial(
+      scene, n,
+      [&](RefArray& arena) {
+        for (uint32_t i = 0; i < n; ++i) arena.push_back({scene.triangle_bounds(i), i});
+      },
+      params, sp, t0);
 }
 
 }  // namespace tb
