@@ -56,9 +56,11 @@ using uninit_vector = std::vector<T, UninitAllocator<T, Align>>;
 // "madvise" mode, the common default, does so only for advised blocks; elsewhere the advice is
 // ignored and ordinary pages remain). Embree's allocator makes the same request for its BVH, so
 // without it the large-scene comparisons would measure page sizes rather than traversal
-// (docs/PERFORMANCE.md, "Session 15: huge pages"). Only the finished arrays get it, not the
-// builders' growing temporaries: advising every large block in the allocator made the
-// spatial-split build ~15% slower (measured, same section).
+// (docs/PERFORMANCE.md, "Session 15: huge pages"). The finished arrays get it (reserved on huge
+// pages where a builder writes them in place, or copied there once) and so do the spatial-split
+// builder's scratch arrays, which it rewrites over and over (session 28), but not every large
+// block: advising every large block in the allocator made the spatial-split build ~15% slower
+// (measured, session 15).
 
 // Drops v's contents and gives it an untouched block of capacity n, advised to use huge pages when
 // it spans one (the advice applies from the first write, which is why the block must be fresh).

@@ -72,7 +72,7 @@ class SpatialBuilder {
     // The arena and the scratch arrays are written over and over: on huge pages (structures/aligned.h)
     // they fault in 2 MiB at a time, unlike a builder's short-lived temporaries (session 15):
     // crytek, conference and sibenik_lucy 2.2-3.5 k fewer faults and 2-6% less process time
-    // (3 interleaved runs each; docs/PERFORMANCE.md, session 28).
+    // (3 interleaved runs each; docs/PERFORMANCE.md, session 28); so do object_split's centroids (session 29).
     reserve_on_huge_pages(arena_, n + budget_ + 2);
     fill(arena_);
     assert(arena_.size() == n);
@@ -97,6 +97,7 @@ class SpatialBuilder {
     bvh.prim_index.reserve(n + n / 4);
     reserve_on_huge_pages(left_, n);
     reserve_on_huge_pages(right_, n);
+    reserve_on_huge_pages(cen_, n);
     std::vector<Task> stack;
     stack.push_back({0, 0, 0, n});
     while (!stack.empty()) {
@@ -509,7 +510,7 @@ class SpatialBuilder {
   std::vector<uint32_t> ocount_;  // ... and counts
   Float4 ocl_, osc_;  // object_split's centroid minimum and bin scale per axis
   Split walls_;  // object_split's walls_apart candidate (kind none: not offered)
-  std::vector<Float4> cen_;  // object_split's centroids, in the order of the references
+  aligned_vector<Float4> cen_;  // object_split's centroids, in the order of the references
   BinBox sbox_[kMaxChopSlabs];  // spatial_bins' bin boxes (references inside one bin, then parts)
   uint32_t scount_[kMaxChopSlabs], sexit_[kMaxChopSlabs];  // ... entries and exits per bin
   AABB parts_[kMaxChopSlabs];  // spatial_bins' boxes of the chopped parts (sbins_ <= 256)
