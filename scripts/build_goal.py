@@ -12,8 +12,8 @@ Each round runs, per scene and mode in turn, one `travbench table build --scheme
 --param two_level=0` process (the thesis' Table 1 rows left out), which times --reps builds of ours
 and then of each Embree quality; the round's ratio is ours / Embree HIGH fast of that process
 (medians of its reps, `build_cpu_ms`), so both sides share the same minutes of the machine.
-Modes: cold (the table's default: every timed build faults in fresh memory, and Embree's rows,
-which run after ours, may reuse memory ours freed) and warm (`--param warm=1`: one untimed build of
+Modes: cold (the table's default: the allocator's free memory goes back to the system before
+every timed build, so each build, ours and Embree's, faults in the memory it uses) and warm (`--param warm=1`: one untimed build of
 each first, each timed build's predecessor freed before its timer, so both sides reuse memory, as a
 per-frame rebuild does). Printed per scene and mode: the median (min-max) ratio over the rounds and
 the median pages each side's build faulted in (their kernel time is part of the CPU time and, on a

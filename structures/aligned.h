@@ -75,6 +75,19 @@ void reserve_on_huge_pages(aligned_vector<T, Align>& v, size_t n) {
   v.swap(fresh);
 }
 
+// Reserves capacity n for an array a builder writes in place and keeps (a tree's nodes): on huge
+// pages where that spans one, so the array needs no move_to_huge_pages copy afterwards, else an
+// ordinary reservation. Returns whether it is on huge pages.
+template <class T, size_t Align>
+bool reserve_to_keep(aligned_vector<T, Align>& v, size_t n) {
+  if (n * sizeof(T) < kHugePageBytes) {
+    v.reserve(n);
+    return false;
+  }
+  reserve_on_huge_pages(v, n);
+  return true;
+}
+
 // Moves a finished array of 2 MiB or more onto huge pages (one copy of it).
 template <class T, size_t Align>
 void move_to_huge_pages(aligned_vector<T, Align>& v) {

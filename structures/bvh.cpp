@@ -5,6 +5,7 @@
 #include <immintrin.h>
 
 #include <algorithm>
+#include <cassert>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -38,6 +39,20 @@ namespace {
 // PrimRef (bvh.h) as SSE registers.
 inline __m128 vlo(const PrimRef& r) { return _mm_load_ps(r.lo); }
 inline __m128 vhi(const PrimRef& r) { return _mm_load_ps(r.hi); }
+
+// The box (bl, bh) and doubled-centroid bounds (cl, ch) of references: a build's root.
+struct RefBounds {
+  __m128 bl, bh, cl, ch;
+};
+RefBounds ref_bounds(std::span<const PrimRef> refs) {
+  RefBounds b{_mm_set1_ps(INFINITY), _mm_set1_ps(-INFINITY), _mm_set1_ps(INFINITY), _mm_set1_ps(-INFINITY)};
+  for (const PrimRef& r : refs) {
+    const __m128 lo = vlo(r), hi = vhi(r), cen = _mm_add_ps(lo, hi);
+    b.bl = grow_lo(b.bl, lo); b.bh = grow_hi(b.bh, hi);
+    b.cl = grow_lo(b.cl, cen); b.ch = grow_hi(b.ch, cen);
+  }
+  return b;
+}
 
 // Centroid bounds travel with a task: the parent's partition pass computes them for free, so a
 // node never needs a bounds pass of its own. Centroids are kept doubled (lo + hi): the factor 2
@@ -306,16 +321,8 @@ BVH build_refs(PrimRef* refs, uint32_t n, __m128 bl, __m128 bh, __m128 cl, __m12
   // (docs/PERFORMANCE.md, session 29); untouched, the rest of the reservation is address space.
   const int threads = std::max(1, p.threads);
   const size_t max_nodes = size_t(2) * std::max(n, 1u) + 2;
-  const bool in_place = threads == 1 && max_nodes * sizeof(BVHNode) >= kHugePageBytes;
-  if (in_place) {
-    reserve_on_huge_pages(bvh.nodes, max_nodes);
-    bvh.nodes.resize(2);
-  } else if (threads == 1) {
-    bvh.nodes.reserve(max_nodes);
-    bvh.nodes.resize(2);
-  } else {
-    bvh.nodes.resize(max_nodes);
-  }
+  const bool in_place = threads == 1 && reserve_to_keep(bvh.nodes, max_nodes);
+  bvh.nodes.resize(threads == 1 ? 2 : max_nodes);
   alignas(16) float flo[4], fhi[4];
   _mm_store_ps(flo, bl);
   _mm_store_ps(fhi, bh);
@@ -366,12 +373,11 @@ BVHSubtreeBuilder::~BVHSubtreeBuilder() = default;
 uint32_t BVHSubtreeBuilder::build(BVH& bvh, uint32_t node, std::span<PrimRef> refs) {
   const uint32_t n = uint32_t(refs.size()), prim_off = uint32_t(bvh.prim_index.size()),
                  node_off = uint32_t(bvh.nodes.size());
-  // The root task's doubled-centroid bounds, as BVH::build(span) forms them.
-  __m128 cl = _mm_set1_ps(INFINITY), ch = _mm_set1_ps(-INFINITY);
-  for (const PrimRef& r : refs) {
-    const __m128 cen = _mm_add_ps(vlo(r), vhi(r));
-    cl = grow_lo(cl, cen), ch = grow_hi(ch, cen);
-  }
+  // The root task's centroid bounds, as BVH::build(span) forms them; the node's box is the
+  // references' bounds (the builder's leaf decision at the root reads its area).
+  const RefBounds rb = ref_bounds(refs);
+  assert((_mm_movemask_ps(_mm_and_ps(_mm_cmpeq_ps(rb.bl, load_vec3(bvh.nodes[node].lo)),
+                                     _mm_cmpeq_ps(rb.bh, load_vec3(bvh.nodes[node].hi)))) & 7) == 7);
   // The builder reads a node's references at left_first, an index into `refs`: the subtree's
   // leaves are moved to prim_index's numbering once it is built.
   bvh.nodes[node].left_first = 0;
@@ -379,7 +385,7 @@ uint32_t BVHSubtreeBuilder::build(BVH& bvh, uint32_t node, std::span<PrimRef> re
   Builder b{params_, bvh, refs.data()};
   b.grow_nodes = true;
   b.next_node = node_off;
-  scratch_->stack.assign(1, BuildTask{cl, ch, node, 0});
+  scratch_->stack.assign(1, BuildTask{rb.cl, rb.ch, node, 0});
   b.run(scratch_->stack, false, scratch_->bins);
   if (bvh.nodes[node].is_leaf()) bvh.nodes[node].left_first += prim_off;
   for (size_t i = node_off; i < bvh.nodes.size(); ++i)
@@ -428,14 +434,8 @@ BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
 
 BVH BVH::build(std::span<PrimRef> refs, const BVHBuildParams& p) {
   const auto t0 = std::chrono::steady_clock::now();
-  const uint32_t n = uint32_t(refs.size());
-  __m128 bl = _mm_set1_ps(INFINITY), bh = _mm_set1_ps(-INFINITY), cl = bl, ch = bh;
-  for (const PrimRef& r : refs) {
-    const __m128 lo = vlo(r), hi = vhi(r), cen = _mm_add_ps(lo, hi);
-    bl = grow_lo(bl, lo); bh = grow_hi(bh, hi);
-    cl = grow_lo(cl, cen); ch = grow_hi(ch, cen);
-  }
-  return build_refs(refs.data(), n, bl, bh, cl, ch, p, t0);
+  const RefBounds b = ref_bounds(refs);
+  return build_refs(refs.data(), uint32_t(refs.size()), b.bl, b.bh, b.cl, b.ch, p, t0);
 }
 
 void BVH::refit(const Scene& scene, int threads) {

@@ -88,9 +88,7 @@ class SpatialBuilder {
     // conference build's faults; session 29). The reservation stays with the tree: untouched, it
     // costs address space only.
     const size_t max_nodes = 2 * (n + budget_) + 2;
-    nodes_on_huge_pages_ = max_nodes * sizeof(BVHNode) >= kHugePageBytes;
-    if (nodes_on_huge_pages_) reserve_on_huge_pages(bvh.nodes, max_nodes);
-    else bvh.nodes.reserve(max_nodes);
+    nodes_on_huge_pages_ = reserve_to_keep(bvh.nodes, max_nodes);
     bvh.nodes.resize(2);
     bvh.nodes[0] = {root.lo, 0, root.hi, uint32_t(n)};
     bvh.nodes[1] = {{0, 0, 0}, 0, {0, 0, 0}, 0};
