@@ -1,5 +1,6 @@
 #include "structures/bvh.h"
 #include "structures/bvh_spatial.h"
+#include "structures/embree_bvh.h"
 #include "structures/box_simd.h"
 
 #include <immintrin.h>
@@ -19,6 +20,7 @@ std::string BVHBuildParams::key() const {
   char buf[160];
   std::snprintf(buf, sizeof buf, "bvh:bins=%d:leaf=%d:ct=%g:ci=%g", bins, max_leaf, cost_traversal, cost_intersect);  // threads do not change the tree
   std::string k = buf;
+  if (builder == BVHBuilder::embree) k += ":embree";
   if (spatial) {
     std::snprintf(buf, sizeof buf, ":spatial:alpha=%g:budget=%g:wall=%g:overlap=%g:walls=%d", split_alpha, split_budget,
                   split_wall, split_overlap, int(split_walls));
@@ -395,6 +397,7 @@ uint32_t BVHSubtreeBuilder::build(BVH& bvh, uint32_t node, std::span<PrimRef> re
 }
 
 BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
+  if (p.builder == BVHBuilder::embree) return build_embree_bvh(scene, p);
   if (p.spatial) {
     SpatialSplitParams sp;
     sp.alpha = p.split_alpha;

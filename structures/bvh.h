@@ -33,7 +33,12 @@ struct BVHNode {
 };
 static_assert(sizeof(BVHNode) == 32);
 
+// Whose builder makes the binary tree: travbench's binned SAH (bvh.cpp; spatial splits:
+// bvh_spatial.cpp) or Embree 3's rtcBuildBVH (structures/embree_bvh.h), to tell a tree from a kernel.
+enum class BVHBuilder { travbench, embree };
+
 struct BVHBuildParams {
+  BVHBuilder builder = BVHBuilder::travbench;
   int bins = 16;          // SAH bins per axis
   int max_leaf = 4;       // leaves never hold more prims than this
   float cost_traversal = 1.f;

@@ -246,21 +246,30 @@ TEST(SpatialBVH, HugeOffsetsAndBuiltinScenes) {
   }
 }
 
-TEST(SpatialBVH, DegenerateInputs) {
-  // Coincident triangles (no object split can separate them), a zero-area triangle, one triangle.
+// Coincident triangles (no object split can separate them) and a zero-area triangle.
+Scene degenerate_scene() {
   Scene s;
   s.name = "degenerate";
   s.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {2, 2, 2}, {2, 2, 2}, {3, 3, 3}};
   for (int i = 0; i < 40; ++i) s.triangles.push_back({0, 1, 2});
   s.triangles.push_back({3, 4, 5});
   s.ensure_views();
-  BVHBuildParams p;
-  const SpatialSplitParams sp;
-  check_spatial(s, build_spatial_bvh(s, p, sp), p.max_leaf, sp);
+  return s;
+}
+Scene one_triangle_scene() {
   Scene one;
   one.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
   one.triangles = {{0, 1, 2}};
-  const BVH b = build_spatial_bvh(one, p, sp);
+  one.ensure_views();
+  return one;
+}
+
+TEST(SpatialBVH, DegenerateInputs) {
+  BVHBuildParams p;
+  const SpatialSplitParams sp;
+  const Scene s = degenerate_scene();
+  check_spatial(s, build_spatial_bvh(s, p, sp), p.max_leaf, sp);
+  const BVH b = build_spatial_bvh(one_triangle_scene(), p, sp);
   EXPECT_EQ(b.prim_index.size(), 1u);
   EXPECT_TRUE(b.nodes[0].is_leaf());
 }
@@ -292,6 +301,85 @@ TEST(SpatialBVH, SchemesStayWatertight) {
       }
     }
   }
+}
+
+}  // namespace
+}  // namespace tb
+
+namespace tb {
+namespace {
+
+// Embree's builder (BVHBuilder::embree, structures/embree_bvh.h) in travbench's layout: the same
+// invariants as travbench's spatial-split builder (every point of every triangle in a leaf that
+// references it and in all of that leaf's ancestors, leaf sizes, duplicates within the budget),
+// plain and with spatial splits, at offsets, on the built-in scenes and on degenerate input.
+TEST(EmbreeBVH, CoversEveryTriangle) {
+  BVHBuildParams p;
+  p.builder = BVHBuilder::embree;
+  SpatialSplitParams sp;
+  sp.budget = p.split_budget;
+  const Scene s = small_on_large(3000, 7);
+  const BVH plain = BVH::build(s, p);
+  SpatialSplitParams none;
+  none.budget = 0;
+  check_spatial(s, plain, p.max_leaf, none);
+  EXPECT_EQ(plain.prim_index.size(), s.num_triangles());
+  p.spatial = true;
+  const BVH split = BVH::build(s, p);
+  check_spatial(s, split, p.max_leaf, sp);
+  EXPECT_GT(split.prim_index.size(), s.num_triangles()) << "Embree made no spatial split";
+  EXPECT_LT(split.stats.sah_cost, plain.stats.sah_cost);
+  for (const Scene& o : {small_on_large(600, 3, {1.5e5f, -3e5f, 1e6f}), make_builtin_scene("room"),
+                         make_builtin_scene("stadium")}) {
+    check_spatial(o, BVH::build(o, p), p.max_leaf, sp);
+  }
+  p.max_leaf = 32;
+  check_spatial(s, BVH::build(s, p), 32, sp);
+  p.max_leaf = 33;
+  EXPECT_THROW(BVH::build(s, p), std::invalid_argument);
+}
+
+TEST(EmbreeBVH, DegenerateAndEmptyInputs) {
+  const Scene s = degenerate_scene();
+  BVHBuildParams p;
+  p.builder = BVHBuilder::embree;
+  for (bool spatial : {false, true}) {
+    p.spatial = spatial;
+    SpatialSplitParams sp;
+    check_spatial(s, BVH::build(s, p), p.max_leaf, sp);
+    const BVH b = BVH::build(one_triangle_scene(), p);
+    EXPECT_EQ(b.prim_index.size(), 1u);
+    EXPECT_TRUE(b.nodes[0].is_leaf());
+    Scene empty;
+    empty.ensure_views();
+    EXPECT_EQ(BVH::build(empty, p).prim_index.size(), 0u);
+  }
+}
+
+// The schemes on Embree's tree: no leak on the must-hit hard cases, the ordinary workloads as the
+// reference; and the cache keys the two builders' trees apart.
+TEST(EmbreeBVH, SchemesStayWatertight) {
+  for (const char* spatial : {"0", "1"}) {
+    SchemeConfig cfg;
+    cfg.params["builder"] = "embree";
+    cfg.params["spatial"] = spatial;
+    for (const char* scene : {"room", "sphere@148376,1234,-223423", "stadium"}) {
+      Bench bench(load_scene(scene));
+      for (const char* scheme : {"bvh_single", "bvh_ranged", "mbvh8_single", "mbvh_rs", "cwbvh_single"}) {
+        for (const std::string& w : hard_case_names()) {
+          if (!hard_case_must_hit(w)) continue;
+          const Accuracy a = test::accuracy_of(bench, scheme, test::small_spec(w, 40), cfg);
+          EXPECT_EQ(a.false_miss, 0u) << scheme << " leaks on " << scene << " / " << w << " spatial=" << spatial;
+        }
+        const Accuracy a = test::accuracy_of(bench, scheme, test::small_spec("bounce:2", 40), cfg);
+        EXPECT_LE(a.mismatches, 1u) << scheme << " on " << scene << " spatial=" << spatial;
+        EXPECT_EQ(a.false_miss, 0u) << scheme << " on " << scene << " spatial=" << spatial;
+      }
+    }
+  }
+  BVHBuildParams a, b;
+  b.builder = BVHBuilder::embree;
+  EXPECT_NE(a.key(), b.key());
 }
 
 }  // namespace

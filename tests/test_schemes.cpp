@@ -202,6 +202,33 @@ TEST(Registry, SpatialSplitParametersAreRefusedWithoutSpatialSplits) {
   }
 }
 
+// builder=embree (structures/embree_bvh.h) takes spatial, split_budget, leaf_size and the costs;
+// travbench's own builder knobs (bins, split_alpha, split_overlap, split_wall, split_walls) would
+// change nothing there and are refused, as is a leaf size Embree cannot build.
+TEST(Registry, EmbreeBuilderRefusesTravbenchBuilderParameters) {
+  for (const char* key : {"bins", "split_alpha", "split_overlap", "split_wall", "split_walls"}) {
+    SchemeConfig c;
+    c.params["builder"] = "embree";
+    c.params[key] = std::string(key) == "bins" ? "8" : std::string(key) == "split_overlap" ? "0.5" : "0";
+    try {
+      make_scheme("mbvh8_single", c);
+      ADD_FAILURE() << key << " accepted with builder=embree";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("builder=embree"), std::string::npos) << e.what();
+    }
+    c.params["builder"] = "travbench";
+    EXPECT_NO_THROW(make_scheme("mbvh8_single", c)) << key;
+  }
+  SchemeConfig ok;
+  ok.params["builder"] = "embree";
+  ok.params["spatial"] = "1";
+  ok.params["split_budget"] = "0.5";
+  ok.params["leaf_size"] = "32";
+  EXPECT_NO_THROW(make_scheme("bvh_single", ok));
+  ok.params["leaf_size"] = "33";
+  EXPECT_THROW(make_scheme("bvh_single", ok), InputError);
+}
+
 // `--param isa=NAME` (issue 17: like-for-like Embree comparisons across machines) runs Embree's
 // kernels for that ISA: sse2 exists on every x86-64 CPU and selects Embree's 4-wide BVH, a
 // different kernel from the default's, which must still match the reference; a name Embree does

@@ -4,7 +4,11 @@ namespace tb {
 
 ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
   const BVHBuildParams d;
-  return {int_param("bins", d.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
+  return {choice_param("builder", "travbench", {"travbench", "embree"},
+                       "who builds the binary BVH: travbench's binned SAH builder, or Embree 3's rtcBuildBVH (HIGH "
+                       "quality; spatial=1: its spatial-split builder) to compare kernels on Embree's tree "
+                       "(structures/embree_bvh.h)"),
+          int_param("bins", d.bins, 2, 256, "binned-SAH bins per axis of the binary BVH build"),
           int_param("leaf_size", default_leaf, 1, 64, "most triangles in a leaf of the binary BVH"),
           bool_param("spatial", default_spatial,
                      "spatial splits (Stich et al. 2009, structures/bvh_spatial.h): straddling triangles are clipped "
@@ -26,6 +30,7 @@ ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
 
 BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   BVHBuildParams p;
+  p.builder = cfg.get_choice("builder") == "embree" ? BVHBuilder::embree : BVHBuilder::travbench;
   p.bins = cfg.get_int("bins");
   p.max_leaf = cfg.get_int("leaf_size");
   p.spatial = cfg.get_bool("spatial");
@@ -34,19 +39,35 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   p.split_wall = float(cfg.get_real("split_wall"));
   p.split_overlap = float(cfg.get_real("split_overlap"));
   p.split_walls = cfg.get_bool("split_walls");
-  // The split_* parameters steer the spatial-split build only; a value other than their default
-  // (what the resolved config holds when the user gave none) would change nothing without it, so
-  // it is refused (every option either works or is refused).
-  if (!p.spatial && cfg.declared)
-    for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"}) {
+  // A parameter that changes nothing under the chosen build is refused (every option either works
+  // or is refused): a value other than its default (what the resolved config holds when the user
+  // gave none). The split_* parameters steer the spatial-split build only; Embree's builder
+  // (structures/embree_bvh.h) takes none of travbench's builder knobs but spatial and split_budget.
+  if (cfg.declared) {
+    const auto changed = [&](const char* key) {
       const ParamSpec& spec = *find_param(*cfg.declared, key);
-      const bool changed = spec.type == ParamType::boolean ? cfg.get_bool(key) != param_to_bool(spec.fallback)
-                                                          : cfg.get_real(key) != param_to_real(spec.fallback);
-      if (changed)
-        throw InputError(std::string("parameter '") + key +
-                         "' only applies to spatial-split builds, and this scheme builds without them (spatial=0): "
-                         "add --param spatial=1 or drop " + key);
+      switch (spec.type) {
+        case ParamType::boolean: return cfg.get_bool(key) != param_to_bool(spec.fallback);
+        case ParamType::integer: return cfg.get_int(key) != param_to_int(spec.fallback);
+        default: return cfg.get_real(key) != param_to_real(spec.fallback);
+      }
+    };
+    if (!p.spatial)
+      for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"})
+        if (changed(key))
+          throw InputError(std::string("parameter '") + key +
+                           "' only applies to spatial-split builds, and this scheme builds without them (spatial=0): "
+                           "add --param spatial=1 or drop " + key);
+    if (p.builder == BVHBuilder::embree) {
+      for (const char* key : {"bins", "split_alpha", "split_overlap", "split_wall", "split_walls"})
+        if (changed(key))
+          throw InputError(std::string("parameter '") + key +
+                           "' steers travbench's BVH builder, not Embree's (builder=embree): drop " + key);
+      if (p.max_leaf > 32)
+        throw InputError("leaf_size " + std::to_string(p.max_leaf) +
+                         ": Embree's builder (builder=embree) makes leaves of at most 32 triangles");
     }
+  }
   return p;
 }
 
