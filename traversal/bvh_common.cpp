@@ -58,16 +58,15 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
           throw InputError(std::string("parameter '") + key +
                            "' only applies to spatial-split builds, and this scheme builds without them (spatial=0): "
                            "add --param spatial=1 or drop " + key);
-    if (p.builder == BVHBuilder::embree) {
+    if (p.builder == BVHBuilder::embree)
       for (const char* key : {"bins", "split_alpha", "split_overlap", "split_wall", "split_walls"})
         if (changed(key))
           throw InputError(std::string("parameter '") + key +
                            "' steers travbench's BVH builder, not Embree's (builder=embree): drop " + key);
-      if (p.max_leaf > 32)
-        throw InputError("leaf_size " + std::to_string(p.max_leaf) +
-                         ": Embree's builder (builder=embree) makes leaves of at most 32 triangles");
-    }
   }
+  if (p.builder == BVHBuilder::embree && p.max_leaf > 32)
+    throw InputError("leaf_size " + std::to_string(p.max_leaf) +
+                     ": Embree's builder (builder=embree) makes leaves of at most 32 triangles");
   return p;
 }
 
