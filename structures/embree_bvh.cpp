@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cstring>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <vector>
@@ -83,6 +84,9 @@ void split_primitive(const RTCBuildPrimitive* prim, unsigned int dim, float pos,
   *left = to_bounds(l), *right = to_bounds(r);
 }
 
+// A device of its own (one thread, as the embree_* schemes'): theirs (traversal/embree_common.cpp)
+// carries the memory monitor that counts their structures' bytes, which a build here must not
+// add to.
 RTCDevice builder_device() {
   static std::once_flag once;
   static RTCDevice device = nullptr;
@@ -108,14 +112,16 @@ BVH build_embree_bvh(const Scene& scene, const BVHBuildParams& p) {
   // Spatial splits need room for the references they add: split_budget extra per triangle.
   const size_t capacity = p.spatial ? n + size_t(double(n) * p.split_budget) + 1 : n;
   std::vector<RTCBuildPrimitive> prims(capacity);
+  AABB root_box;
   for (size_t i = 0; i < n; ++i) {
     const AABB b = scene.triangle_bounds(uint32_t(i));
+    root_box.grow(b);
     RTCBuildPrimitive& r = prims[i];
     r.lower_x = b.lo.x, r.lower_y = b.lo.y, r.lower_z = b.lo.z, r.geomID = 0;
     r.upper_x = b.hi.x, r.upper_y = b.hi.y, r.upper_z = b.hi.z, r.primID = uint32_t(i);
   }
-  RTCDevice device = builder_device();
-  RTCBVH handle = rtcNewBVH(device);
+  // The nodes live in the RTCBVH's allocator until it is released, on every path out.
+  const std::unique_ptr<RTCBVHTy, void (*)(RTCBVH)> handle(rtcNewBVH(builder_device()), rtcReleaseBVH);
   RTCBuildArguments a = rtcDefaultBuildArguments();
   a.byteSize = sizeof(a);
   a.buildQuality = RTC_BUILD_QUALITY_HIGH;
@@ -126,7 +132,7 @@ BVH build_embree_bvh(const Scene& scene, const BVHBuildParams& p) {
   a.maxLeafSize = uint32_t(p.max_leaf);
   a.traversalCost = p.cost_traversal;
   a.intersectionCost = p.cost_intersect;
-  a.bvh = handle;
+  a.bvh = handle.get();
   a.primitives = prims.data();
   a.primitiveCount = n;
   a.primitiveArrayCapacity = capacity;
@@ -137,14 +143,10 @@ BVH build_embree_bvh(const Scene& scene, const BVHBuildParams& p) {
   a.splitPrimitive = p.spatial ? split_primitive : nullptr;
   a.userPtr = const_cast<Scene*>(&scene);
   auto* root = static_cast<const ENode*>(rtcBuildBVH(&a));
-  if (!root) {
-    rtcReleaseBVH(handle);
-    throw std::runtime_error("embree: rtcBuildBVH failed");
-  }
-  // travbench's layout: nodes[0] the root, nodes[1] padding, a node's children side by side.
-  AABB root_box;
-  for (size_t i = 0; i < n; ++i) root_box.grow(scene.triangle_bounds(uint32_t(i)));
-  bvh.nodes.reserve(4 * n + 2);
+  if (!root) throw std::runtime_error("embree: rtcBuildBVH failed");
+  // travbench's layout: nodes[0] the root, nodes[1] padding, a node's children side by side (a
+  // binary tree over at most `capacity` references: at most 2 capacity - 1 nodes).
+  bvh.nodes.reserve(2 * capacity + 2);
   bvh.nodes.resize(2);
   bvh.prim_index.reserve(capacity);
   uint32_t max_depth = 0;
@@ -174,7 +176,6 @@ BVH build_embree_bvh(const Scene& scene, const BVHBuildParams& p) {
       stack.push_back({in->child[c], left + uint32_t(c), t.depth + 1});
     }
   }
-  rtcReleaseBVH(handle);
   bvh.stats.max_depth = max_depth;
   bvh.finish_stats(p, t0);
   return bvh;
