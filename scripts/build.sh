@@ -1,9 +1,30 @@
 #!/usr/bin/env bash
-# Configures and builds travbench (Release, -O3 -march=native) into build/.
+# Configures and builds travbench (Release, -O3 -march=native, profile-guided) into build/.
+#
+#   scripts/build.sh [CMAKE_ARGS...]      # e.g. -DTRAVBENCH_MARCH=znver3
+#   BUILD_DIR=build-znver3 scripts/build.sh -DTRAVBENCH_MARCH=znver3
+#   TRAVBENCH_PGO=0 scripts/build.sh      # without profile-guided optimisation
+#
+# Profile-guided (GCC) by default: first an instrumented travbench in <BUILD_DIR>-pgo (the same
+# CMake arguments, only the app and its library), then scripts/pgo_train.sh on built-in scenes,
+# then the real build with those counts. Primary rays of the single-ray and packet kernels run
+# 5-15% faster for it, bounce rays within the noise (docs/PERFORMANCE.md, session 31); the
+# arithmetic is unchanged (ctest runs on this build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+dir="${BUILD_DIR:-build}"
 # ccache, when installed, makes rebuilds across checkouts cheap (CI has none: a plain build).
 launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release "${launcher[@]}" "$@" >/dev/null
-cmake --build build -j "$(nproc)"
+pgo=(-DTRAVBENCH_PGO_USE=)
+if [ "${TRAVBENCH_PGO:-1}" = 1 ]; then
+  gen="$dir-pgo"
+  cmake -S . -B "$gen" -DCMAKE_BUILD_TYPE=Release -DTRAVBENCH_PGO_GENERATE=ON -DTRAVBENCH_BUILD_TESTS=OFF \
+    -DTRAVBENCH_BUILD_BENCH=OFF "${launcher[@]}" "$@" >/dev/null
+  cmake --build "$gen" -j "$(nproc)" --target travbench
+  rm -rf "$gen/pgo-profile"  # counts add up across runs: train from zero
+  scripts/pgo_train.sh "$gen"
+  pgo=(-DTRAVBENCH_PGO_USE="$PWD/$gen/pgo-profile")
+fi
+cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=Release "${launcher[@]}" "${pgo[@]}" "$@" >/dev/null
+cmake --build "$dir" -j "$(nproc)"

@@ -173,12 +173,15 @@ template <bool ExpAdd = false>
     A8 = _mm256_set_m128(A4, A4);
   }
   __m256 n = r.tmin, f = tfar;
-  for (int a = 0; a < 3; ++a) {
+  // One axis at a time; the permute's selector is a template argument, an immediate whether or not
+  // the compiler unrolls (a loop over `a` does not build at -O0 or with -fprofile-generate).
+  const auto axis = [&]<int a>() {
     const __m256 A = _mm256_permute_ps(A8, 0x55 * a);
     const __m256 Bn = _mm256_permute_ps(Bn8, 0x55 * a), Bf = _mm256_permute_ps(Bf8, 0x55 * a);
     n = _mm256_max_ps(cw_plane(nd, r.rows[a], A, Bn), n);
     f = _mm256_min_ps(cw_plane(nd, r.rows[3 + a], A, Bf), f);
-  }
+  };
+  axis.template operator()<0>(), axis.template operator()<1>(), axis.template operator()<2>();
   tn = n;
   return _mm256_cmp_ps(n, f, _CMP_LE_OQ);
 }

@@ -289,7 +289,7 @@ void traverse(const BVH& bvh, const Scene& scene, const Ray& ray, double& tfar, 
   if (bvh.nodes.empty()) return;
   const DRay r(ray);
   const BVHNode* nodes = bvh.nodes.data();
-  double tnear, t0, t1;
+  double tnear, t0 = 0, t1 = 0;  // set by box_hit where it returns true (read only then)
   std::vector<uint32_t> stack;
   stack.reserve(64);
   stack.push_back(0);
