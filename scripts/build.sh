@@ -7,8 +7,8 @@
 #
 # Profile-guided (GCC) by default: first an instrumented travbench in <BUILD_DIR>-pgo (the same
 # CMake arguments, only the app and its library), then scripts/pgo_train.sh on built-in scenes,
-# then the real build with those counts. Primary rays of the single-ray and packet kernels run
-# 5-15% faster for it, bounce rays within the noise (docs/PERFORMANCE.md, session 31); the
+# then the real build with those counts. Primary rays of the single-ray kernels run 3-11% faster
+# for it, bounce rays, packets and batches within the noise (docs/PERFORMANCE.md, session 31); the
 # arithmetic is unchanged (ctest runs on this build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
