@@ -7,9 +7,9 @@
 #
 # Profile-guided (GCC) by default: first an instrumented travbench in <BUILD_DIR>-pgo (the same
 # CMake arguments, only the app and its library), then scripts/pgo_train.sh on built-in scenes,
-# then the real build with those counts. Primary rays of the single-ray kernels run 3-11% faster
-# for it, bounce rays, packets and batches within the noise (docs/PERFORMANCE.md, session 31); the
-# arithmetic is unchanged (ctest runs on this build).
+# then the real build with those counts. Primary rays of the single-ray kernels run 2-11% faster
+# for it on 12 of 13 scenes (crytek within its noise); bounce rays, packets and batches within the
+# noise (docs/PERFORMANCE.md, session 31). The arithmetic is unchanged (ctest runs on this build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dir="${BUILD_DIR:-build}"
