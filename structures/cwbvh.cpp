@@ -65,9 +65,10 @@ uint8_t cw_quantize_hi(float p, float s, float hi) {
 std::string CWBVHStats::describe() const {
   char buf[256];
   std::snprintf(buf, sizeof buf,
-                "nodes=%u full_nodes=%u leaves=%u blocks=%u max_depth=%u avg_children=%.2f bytes_per_node=%zu node_bytes=%zu "
-                "tri_bytes=%zu box_growth=%.4f compress_ms=%.1f",
-                nodes, full_nodes, leaves, blocks, max_depth, avg_children, nodes ? node_bytes / nodes : size_t(0), node_bytes,
+                "nodes=%u full_nodes=%u leaves=%u blocks=%u leaf_blocks=%s max_depth=%u avg_children=%.2f bytes_per_node=%zu "
+                "node_bytes=%zu tri_bytes=%zu box_growth=%.4f compress_ms=%.1f",
+                nodes, full_nodes, leaves, blocks, indexed_leaves ? "indexed" : "mbvh8", max_depth, avg_children,
+                nodes ? node_bytes / nodes : size_t(0), node_bytes,
                 tri_bytes, box_growth, compress_ms);
   return buf;
 }
@@ -91,11 +92,12 @@ uint32_t CWBVH::child_ref(uint32_t node, int slot) const {
   if (!slot_used(node, slot)) return 0;
   if (node & kCWFull) {
     const uint32_t r = full[node & ~kCWFull].ref[slot];
-    return mbvh_ref::is_leaf(r) ? cw_leaf_to_mbvh(r) : r;
+    return mbvh_ref::is_leaf(r) && leaves == CWLeaves::blocks ? cw_leaf_to_mbvh(r) : r;
   }
   const CWNode& n = nodes[node];
   if (n.imask >> slot & 1) return n.child_base + n.meta[slot];
-  return cw_leaf_to_mbvh(n.leaf_base + n.meta[slot]);
+  const uint32_t r = n.leaf_base + n.meta[slot];
+  return leaves == CWLeaves::blocks ? cw_leaf_to_mbvh(r) : r;
 }
 
 std::array<int8_t, 8> cw_octant_slots(const MBVHNode<8>& n) {
@@ -154,6 +156,80 @@ std::vector<uint8_t> full_top(const MBVH<8, 8>& m, size_t budget) {
   return full;
 }
 
+// Appends leaf `ref`'s triangles (its blocks' real lanes, in order) as indexed blocks and returns
+// how many. Packing: a block starts with the first triangle left, then repeatedly takes the
+// triangle left that adds the fewest vertices to its table (ties: the earliest), while the table
+// holds at most 8 distinct vertices and the block 8 triangles. Vertices are told apart by their
+// bits (-0 and +0 stay two vertices: the test must see the scene's floats).
+uint32_t append_indexed_leaf(const MBVH<8, 8>& m, uint32_t ref, aligned_vector<CWTriBlock>& out) {
+  struct Tri {
+    uint32_t bits[3][3];  // corner, axis
+    uint32_t prim;
+  };
+  const uint32_t ntris = mbvh_ref::num_tris(ref), first = mbvh_ref::first_block(ref);
+  std::vector<Tri> left;
+  for (uint32_t t = 0; t < ntris; ++t) {
+    const TriBlock<8>& b = m.blocks[first + t / 8];
+    Tri tri;
+    for (int c = 0; c < 3; ++c)
+      for (int a = 0; a < 3; ++a) tri.bits[c][a] = std::bit_cast<uint32_t>(b.v[c][a][t % 8]);
+    tri.prim = b.prim[t % 8];
+    left.push_back(tri);
+  }
+  uint32_t made = 0;
+  while (!left.empty()) {
+    CWTriBlock blk{};
+    std::vector<std::array<uint32_t, 3>> table;
+    const auto slot_of = [&](const uint32_t (&v)[3]) {
+      for (size_t i = 0; i < table.size(); ++i)
+        if (table[i][0] == v[0] && table[i][1] == v[1] && table[i][2] == v[2]) return int(i);
+      return -1;
+    };
+    const auto new_vertices = [&](const Tri& t) {
+      int n = 0;
+      for (int c = 0; c < 3; ++c) {
+        bool dup = slot_of(t.bits[c]) >= 0;
+        for (int d = 0; d < c && !dup; ++d) dup = std::equal(t.bits[c], t.bits[c] + 3, t.bits[d]);
+        n += !dup;
+      }
+      return n;
+    };
+    uint32_t lanes = 0;
+    for (;;) {
+      int best = -1, best_new = 4;
+      for (size_t i = 0; i < left.size(); ++i) {
+        const int n = new_vertices(left[i]);
+        if (table.size() + size_t(n) <= 8 && n < best_new) best = int(i), best_new = n;
+        if (lanes == 0) break;  // a block starts with the first triangle left
+      }
+      if (best < 0 || lanes == 8) break;
+      const Tri t = left[size_t(best)];
+      left.erase(left.begin() + best);
+      for (int c = 0; c < 3; ++c) {
+        int sl = slot_of(t.bits[c]);
+        if (sl < 0) {
+          sl = int(table.size());
+          table.push_back({t.bits[c][0], t.bits[c][1], t.bits[c][2]});
+        }
+        blk.idx[c][lanes] = uint8_t(sl);
+      }
+      blk.prim[lanes] = t.prim;
+      ++lanes;
+    }
+    blk.lanes = uint8_t(lanes);
+    for (uint32_t l = lanes; l < 8; ++l) {  // padding lanes repeat the last triangle
+      for (int c = 0; c < 3; ++c) blk.idx[c][l] = blk.idx[c][lanes - 1];
+      blk.prim[l] = blk.prim[lanes - 1];
+    }
+    for (int a = 0; a < 3; ++a)
+      for (size_t i = 0; i < 8; ++i) blk.v[a][i] = std::bit_cast<float>(table[i < table.size() ? i : 0][size_t(a)]);
+    out.push_back(blk);
+    ++made;
+  }
+  out.back().last = 1;
+  return made;
+}
+
 }  // namespace
 
 std::array<int8_t, 8> cw_slots(const MBVHNode<8>& n, CWSlots slots) {
@@ -163,7 +239,7 @@ std::array<int8_t, 8> cw_slots(const MBVHNode<8>& n, CWSlots slots) {
   return child;
 }
 
-CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
+CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots, CWLeaves leaves) {
   const auto t0 = std::chrono::steady_clock::now();
   if (m.small_leaf != 0 || !m.small.empty())
     throw std::invalid_argument("cwbvh: needs an MBVH8 with 8-wide blocks only (small=0)");
@@ -172,7 +248,13 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
   CWBVH out;
   const std::vector<uint8_t> is_full = full_top(m, size_t(std::floor(full_share * double(m.nodes.size()))));
   out.nodes.reserve(m.nodes.size());
-  out.blocks.reserve(m.blocks.size());
+  out.leaves = leaves;
+  const bool indexed = leaves == CWLeaves::indexed;
+  if (indexed) {
+    out.iblocks.reserve(m.blocks.size() * 2);
+  } else {
+    out.blocks.reserve(m.blocks.size());
+  }
   struct Item {
     uint32_t src, dst, depth;  // dst: index in out.full for a full node, in out.nodes otherwise
   };
@@ -188,13 +270,21 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
   uint64_t growth_n = 0, children = 0;
   double bound[3] = {0, 0, 0};
   int e_min = 127, e_max = -128;
-  const auto copy_leaf = [&](uint32_t ref) {  // appends a leaf's blocks; returns its triangle count
+  // Where the next leaf block goes (either kind).
+  const auto next_block = [&] { return uint32_t(indexed ? out.iblocks.size() : out.blocks.size()); };
+  // Appends a leaf's blocks; returns its triangle count (indexed: its block count).
+  const auto copy_leaf = [&](uint32_t ref) {
     const uint32_t ntris = mbvh_ref::num_tris(ref), nblocks = (ntris + 7) / 8;
     if (ntris > 16) throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most 16: merge <= 16)");
-    for (uint32_t k = 0; k < nblocks; ++k) out.blocks.push_back(m.blocks[mbvh_ref::first_block(ref) + k]);
     out.stats.leaves++;
+    if (indexed) return append_indexed_leaf(m, ref, out.iblocks);
+    for (uint32_t k = 0; k < nblocks; ++k) out.blocks.push_back(m.blocks[mbvh_ref::first_block(ref) + k]);
     return ntris;
   };
+  const auto leaf_ref = [&](uint32_t first_block, uint32_t ntris) {
+    return indexed ? cw_ileaf_ref(first_block) : cw_leaf_ref(first_block, ntris);
+  };
+  const uint32_t max_blocks = indexed ? kCWMaxIndexedBlocks : kCWMaxBlocks;
   while (!stack.empty()) {
     const Item it = stack.back();
     stack.pop_back();
@@ -208,7 +298,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
       MBVHNode<8> f{};
       f.num_children = nc;
       const std::array<int8_t, 8> slot_child = cw_slots(src, slots);
-      const uint32_t first_block = uint32_t(out.blocks.size());
+      const uint32_t first_block = next_block();
       std::vector<Item> kids;
       for (int i = 0; i < 8; ++i) {
         const int c = slot_child[size_t(i)];
@@ -221,8 +311,8 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
         }
         const uint32_t ref = src.ref[c];
         if (mbvh_ref::is_leaf(ref)) {
-          const uint32_t at = uint32_t(out.blocks.size());
-          f.ref[i] = cw_leaf_ref(at, copy_leaf(ref));
+          const uint32_t at = next_block();
+          f.ref[i] = leaf_ref(at, copy_leaf(ref));
         } else if (is_full[ref]) {
           f.ref[i] = kCWFull | uint32_t(out.full.size());
           kids.push_back({ref, uint32_t(out.full.size()), it.depth + 1});
@@ -233,10 +323,10 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
           out.nodes.emplace_back();
         }
       }
-      if (out.blocks.size() >= kCWMaxBlocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
+      if (next_block() >= max_blocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
       // Unused slots (never entered: their planes are infinite) still reference a real triangle.
       for (int i = 0; i < 8; ++i)
-        if (slot_child[size_t(i)] < 0) f.ref[i] = cw_leaf_ref(out.blocks.size() > first_block ? first_block : 0, 1);
+        if (slot_child[size_t(i)] < 0) f.ref[i] = leaf_ref(next_block() > first_block ? first_block : 0, 1);
       out.full[it.dst] = f;
       for (auto k = kids.rbegin(); k != kids.rend(); ++k) stack.push_back(*k);
       continue;
@@ -254,7 +344,7 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
     // Interior children consecutively, then this node's leaf blocks consecutively, both in slot
     // order.
     n.child_base = uint32_t(out.nodes.size());
-    const uint32_t first_block = uint32_t(out.blocks.size());
+    const uint32_t first_block = next_block();
     uint32_t interior = 0, block_off = 0;
     std::vector<Item> kids;
     const std::array<int8_t, 8> slot_child = cw_slots(src, slots);
@@ -275,10 +365,16 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
       }
       const uint32_t ref = src.ref[c];
       if (mbvh_ref::is_leaf(ref)) {
-        const uint32_t ntris = copy_leaf(ref), nblocks = (ntris + 7) / 8;
-        if (block_off + nblocks > 16) throw std::invalid_argument("cwbvh: more than 16 leaf blocks under one node");
-        n.meta[i] = uint8_t(block_off << 4 | (ntris - 1));
-        block_off += nblocks;
+        if (indexed) {
+          // At most 8 leaves of at most 8 blocks (a block holds any 2 triangles): offsets < 64.
+          n.meta[i] = uint8_t(block_off);
+          block_off += copy_leaf(ref);
+        } else {
+          const uint32_t ntris = copy_leaf(ref), nblocks = (ntris + 7) / 8;
+          if (block_off + nblocks > 16) throw std::invalid_argument("cwbvh: more than 16 leaf blocks under one node");
+          n.meta[i] = uint8_t(block_off << 4 | (ntris - 1));
+          block_off += nblocks;
+        }
       } else {
         n.imask |= uint8_t(1u << i);
         n.meta[i] = uint8_t(interior);
@@ -289,8 +385,8 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
       if (ta > 0) growth += double(decode_box(n, i).area()) / ta - 1.0, growth_n++;
     }
     // Unused slots (meta 0) reference a real triangle: the node's first leaf block, or block 0.
-    if (first_block + block_off >= kCWMaxBlocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
-    n.leaf_base = cw_leaf_ref(block_off ? first_block : 0, 1);
+    if (first_block + block_off >= max_blocks) throw std::invalid_argument("cwbvh: too many triangle blocks");
+    n.leaf_base = leaf_ref(block_off ? first_block : 0, 1);
     for (int a = 0; a < 3; ++a) {
       bound[a] = std::max(bound[a], std::fabs(double(n.p[a])) + 255.0 * double(cw_scale(n.e[a])));
       e_min = std::min(e_min, int(n.e[a])), e_max = std::max(e_max, int(n.e[a]));
@@ -307,14 +403,16 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots) {
   CWBVHStats& s = out.stats;
   s.nodes = uint32_t(out.nodes.size() + out.full.size());
   s.full_nodes = uint32_t(out.full.size());
-  s.blocks = uint32_t(out.blocks.size());
+  s.blocks = next_block();
+  s.indexed_leaves = indexed;
   s.node_bytes = out.nodes.size() * sizeof(CWNode) + out.full.size() * sizeof(MBVHNode<8>);
-  s.tri_bytes = out.blocks.size() * sizeof(TriBlock<8>);
+  s.tri_bytes = out.blocks.size() * sizeof(TriBlock<8>) + out.iblocks.size() * sizeof(CWTriBlock);
   s.avg_children = s.nodes ? double(children) / s.nodes : 0;
   s.box_growth = growth_n ? growth / double(growth_n) : 0;
   move_to_huge_pages(out.nodes);
   move_to_huge_pages(out.full);
   move_to_huge_pages(out.blocks);
+  move_to_huge_pages(out.iblocks);
   s.compress_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;
 }

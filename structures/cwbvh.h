@@ -28,7 +28,8 @@
 // 1.72 -> 1.56 leaves per primary ray, 3.20 -> 2.88 on bounce:2; sponza, conference and bunny
 // unchanged (128x128, every node compressed; docs/PERFORMANCE.md, session 23). Children are interior nodes
 // and leaf blocks in slot order. Leaves are the MBVH8's TriBlock<8> SoA blocks, tested by the same
-// watertight SIMD kernel.
+// watertight SIMD kernel, or (`leaves=indexed`, cwbvh_single's default) indexed blocks over a
+// table of distinct vertices (CWTriBlock below).
 //
 // Uncompressed top (`full_share`, Benthin, Wald, Woop and Afra 2018, "Compressed-Leaf Bounding
 // Volume Hierarchies": compress where most of the memory is, keep full-precision nodes where most
@@ -77,12 +78,35 @@ struct alignas(16) CWNode {
 };
 static_assert(sizeof(CWNode) == 80);
 
+// An indexed leaf block (`leaves=indexed`; the "compressed leaves" of Benthin, Wald, Woop and Afra
+// 2018 in the simplest lossless form): up to 8 triangles over a table of up to 8 distinct vertices,
+// each corner a byte index into the table: 160 bytes where the MBVH8's TriBlock<8> takes 320 and
+// repeats a vertex once per triangle that uses it (and once per padding lane). The vertices are the
+// scene's floats, bit for bit, so the watertight test computes exactly what it computes on a
+// TriBlock<8>: the per-corner operations (origin subtraction, shear) run once per table vertex and
+// a lane's corner is a permute of the results, the same values. A leaf takes as many blocks as its
+// triangles need for 8 distinct vertices each (compress packs them greedily); `last` ends the leaf.
+struct alignas(32) CWTriBlock {
+  float v[3][8];      // vertex table: axis, slot
+  uint8_t idx[3][8];  // corner c of lane l is vertex slot idx[c][l]
+  uint8_t lanes;      // real triangles: lanes 0..lanes-1 (the others repeat lane lanes-1)
+  uint8_t last;       // 1 on the last block of its leaf
+  uint8_t pad[6];
+  uint32_t prim[8];   // scene triangles
+};
+static_assert(sizeof(CWTriBlock) == 160);
+
+// How a CWBVH stores its leaves: the MBVH8's TriBlock<8> (`blocks`) or indexed (CWTriBlock,
+// `iblocks`).
+enum class CWLeaves { blocks, indexed };
+
 struct CWBVHStats {
   uint32_t nodes = 0, full_nodes = 0, leaves = 0, blocks = 0, max_depth = 0;  // nodes: compressed and full
   size_t node_bytes = 0, tri_bytes = 0;
   double avg_children = 0;
   double box_growth = 0;  // mean (decoded child area / true child area) - 1, over children with area
   double compress_ms = 0;
+  bool indexed_leaves = false;  // CWLeaves::indexed: `blocks` counts CWTriBlocks
   std::string describe() const;
 };
 
@@ -96,7 +120,9 @@ struct CWBVH {
   aligned_vector<CWNode> nodes;          // compressed nodes (nodes[0] = root where `full` is empty)
   aligned_vector<MBVHNode<8>> full;      // the uncompressed top (full[0] = root where not empty)
   uint32_t root = 0;                     // reference of the root: 0 or kCWFull
-  aligned_vector<TriBlock<8>> blocks;    // leaf triangles, each node's leaves contiguous
+  aligned_vector<TriBlock<8>> blocks;    // leaf triangles, each node's leaves contiguous (CWLeaves::blocks)
+  aligned_vector<CWTriBlock> iblocks;    // the same, indexed (CWLeaves::indexed)
+  CWLeaves leaves = CWLeaves::blocks;
   CWBVHStats stats;
   // Per axis an upper bound of |p| + 255 * 2^e over the compressed nodes (so of every coordinate a
   // node's grid can express) and of every finite plane of a full node, rounded up: the traversal's per-ray error bound of its fused plane
@@ -111,11 +137,13 @@ struct CWBVH {
   // of at most 16 triangles; throws std::invalid_argument otherwise. full_share (0..1): the share
   // of the nodes kept uncompressed (floor(full_share * nodes) of largest area, see above); slots:
   // the child slot order of every node (see above).
-  static CWBVH compress(const MBVH<8, 8>& m, double full_share = 0, CWSlots slots = CWSlots::octant);
+  static CWBVH compress(const MBVH<8, 8>& m, double full_share = 0, CWSlots slots = CWSlots::octant,
+                        CWLeaves leaves = CWLeaves::blocks);
   // Of a node given by its CWBVH reference: slot i's box — decoded (conservative; cw_decode per
   // coordinate) for a compressed node, the stored float box for a full one.
   AABB child_box(uint32_t node, int slot) const;
-  // Slot i's child in the MBVH reference format (mbvh_ref: leaf = first block and triangle count),
+  // Slot i's child in the MBVH reference format (mbvh_ref: leaf = first block and triangle count;
+  // with indexed leaves the indexed leaf reference, cw_ileaf_ref),
   // interior children as CWBVH references (index in `nodes`, or kCWFull | index in `full`), 0 for
   // an unused slot of a node with no such child. `node` is a CWBVH reference (either kind).
   uint32_t child_ref(uint32_t node, int slot) const;
@@ -135,6 +163,12 @@ std::array<int8_t, 8> cw_slots(const MBVHNode<8>& n, CWSlots slots);
 // and 2^27 blocks. cw_leaf_to_mbvh gives the MBVH reference the leaf kernels take.
 inline constexpr uint32_t kCWMaxBlocks = 1u << 27;
 constexpr uint32_t cw_leaf_ref(uint32_t first_block, uint32_t ntris) { return mbvh_ref::kLeaf | first_block << 4 | (ntris - 1); }
+// With indexed leaves (CWLeaves::indexed) a leaf reference is kLeaf | its first CWTriBlock (the
+// blocks say where the leaf ends), and a compressed node's meta[i] the offset of leaf i's first
+// block from the node's first (at most 255).
+inline constexpr uint32_t kCWMaxIndexedBlocks = 1u << 30;
+constexpr uint32_t cw_ileaf_ref(uint32_t first_block) { return mbvh_ref::kLeaf | first_block; }
+constexpr uint32_t cw_ileaf_block(uint32_t r) { return r & ~mbvh_ref::kLeaf; }
 constexpr uint32_t cw_leaf_to_mbvh(uint32_t r) {
   return mbvh_ref::make_leaf((r >> 4) & (kCWMaxBlocks - 1), (r & 15u) + 1);
 }

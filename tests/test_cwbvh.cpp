@@ -13,6 +13,7 @@
 #include <cstring>
 #include <random>
 
+#include "harness/trace_runner.h"
 #include "structures/builtin_scenes.h"
 #include "structures/cwbvh.h"
 #include "traversal/cwbvh_traverse.h"
@@ -270,6 +271,42 @@ MBVH<8, 8> mbvh8_of(const Scene& s) {
   return MBVH<8, 8>::collapse(s, BVH::build(s, p.bvh), p);
 }
 
+// An indexed leaf (CWLeaves::indexed) holds exactly the MBVH8 leaf's triangles, each once, with its
+// vertices bit for bit: blocks of 1-8 real lanes over at most 8 table vertices, padding lanes
+// repeating the last real one, `last` on the leaf's last block only.
+void check_indexed_leaf(const MBVH<8, 8>& m, uint32_t mr, const CWBVH& c, uint32_t cr) {
+  using Tri = std::array<uint32_t, 10>;  // prim, then corner-major vertex bits
+  std::vector<Tri> want, got;
+  const uint32_t n = mbvh_ref::num_tris(mr);
+  for (uint32_t t = 0; t < n; ++t) {
+    const TriBlock<8>& b = m.blocks[mbvh_ref::first_block(mr) + t / 8];
+    Tri x{b.prim[t % 8]};
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) x[size_t(1 + 3 * k + a)] = std::bit_cast<uint32_t>(b.v[k][a][t % 8]);
+    want.push_back(x);
+  }
+  for (uint32_t bi = cw_ileaf_block(cr);; ++bi) {
+    ASSERT_LT(bi, c.iblocks.size());
+    const CWTriBlock& b = c.iblocks[bi];
+    ASSERT_GE(b.lanes, 1);
+    ASSERT_LE(b.lanes, 8);
+    for (int l = 0; l < 8; ++l) {
+      const int src = std::min(l, b.lanes - 1);  // padding lanes repeat the last real one
+      EXPECT_EQ(b.prim[l], b.prim[src]);
+      Tri x{b.prim[l]};
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_LT(b.idx[k][l], 8);
+        EXPECT_EQ(b.idx[k][l], b.idx[k][src]);
+        for (int a = 0; a < 3; ++a) x[size_t(1 + 3 * k + a)] = std::bit_cast<uint32_t>(b.v[a][b.idx[k][l]]);
+      }
+      if (l < b.lanes) got.push_back(x);
+    }
+    if (b.last) break;
+  }
+  std::sort(want.begin(), want.end()), std::sort(got.begin(), got.end());
+  EXPECT_EQ(want, got) << "an indexed leaf with other triangles than the MBVH8's";
+}
+
 // Walks both trees in step: the same children in the slots cw_slots assigns (each child in
 // exactly one), decoded boxes containing the MBVH8's, identical leaf blocks.
 void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c, CWSlots slots) {
@@ -295,8 +332,12 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c, CWSlots slots) {
         // may let a ray into an unused slot of a tiny node).
         const uint32_t raw = (ci & kCWFull) ? c.full[ci & ~kCWFull].ref[i] : c.nodes[ci].leaf_base + c.nodes[ci].meta[i];
         ASSERT_TRUE(mbvh_ref::is_leaf(raw));
-        EXPECT_EQ(mbvh_ref::num_tris(cw_leaf_to_mbvh(raw)), 1u);
-        EXPECT_LT(mbvh_ref::first_block(cw_leaf_to_mbvh(raw)), c.blocks.size());
+        if (c.leaves == CWLeaves::indexed) {
+          EXPECT_LT(cw_ileaf_block(raw), c.iblocks.size());
+        } else {
+          EXPECT_EQ(mbvh_ref::num_tris(cw_leaf_to_mbvh(raw)), 1u);
+          EXPECT_LT(mbvh_ref::first_block(cw_leaf_to_mbvh(raw)), c.blocks.size());
+        }
         const AABB b = c.child_box(ci, i);
         EXPECT_TRUE(b.lo.x > b.hi.x && b.lo.y > b.hi.y && b.lo.z > b.hi.z) << "unused slot not inverted";
         continue;
@@ -316,6 +357,10 @@ void check_same_tree(const MBVH<8, 8>& m, const CWBVH& c, CWSlots slots) {
           ASSERT_FALSE(cr & kCWFull) << "a full node below a compressed one";
         }
         stack.push_back({mr, cr});
+        continue;
+      }
+      if (c.leaves == CWLeaves::indexed) {
+        check_indexed_leaf(m, mr, c, cr);
         continue;
       }
       ASSERT_EQ(mbvh_ref::num_tris(mr), mbvh_ref::num_tris(cr));
@@ -373,23 +418,32 @@ TEST(CWBVH, SameTreeConservativeBoxesAndCompressed) {
     const MBVH<8, 8> m = mbvh8_of(s);
     // Every node compressed, cwbvh_single's default uncompressed top (full_top = 4 percent), the
     // most the 0.35x goal allows (5%), and every node full.
-    for (double share : {0.0, 0.04, 0.05, 1.0}) {
-      SCOPED_TRACE(share);
-      const CWSlots slots = share == 0.04 ? CWSlots::mbvh : CWSlots::octant;  // cwbvh_single's default: mbvh
-      const CWBVH c = CWBVH::compress(m, share, slots);
-      check_same_tree(m, c, slots);
-      check_full_top_is_largest(c);
-      EXPECT_EQ(c.full.size(), size_t(std::floor(share * double(m.nodes.size()))));
-      EXPECT_EQ(c.root, c.full.empty() ? 0u : kCWFull);
-      if (share <= 0.05) {
-        EXPECT_LE(double(c.stats.node_bytes), 0.35 * double(m.stats.node_bytes));
+    for (double share : {0.0, 0.04, 0.05, 1.0})
+      for (const CWLeaves leaves : {CWLeaves::blocks, CWLeaves::indexed}) {
+        SCOPED_TRACE(share);
+        SCOPED_TRACE(leaves == CWLeaves::indexed ? "indexed leaves" : "block leaves");
+        const CWSlots slots = share == 0.04 ? CWSlots::mbvh : CWSlots::octant;  // cwbvh_single's default: mbvh
+        const CWBVH c = CWBVH::compress(m, share, slots, leaves);
+        check_same_tree(m, c, slots);
+        check_full_top_is_largest(c);
+        EXPECT_EQ(c.full.size(), size_t(std::floor(share * double(m.nodes.size()))));
+        EXPECT_EQ(c.root, c.full.empty() ? 0u : kCWFull);
+        if (share <= 0.05) {
+          EXPECT_LE(double(c.stats.node_bytes), 0.35 * double(m.stats.node_bytes));
+        }
+        EXPECT_EQ(c.stats.node_bytes, c.nodes.size() * sizeof(CWNode) + c.full.size() * sizeof(MBVHNode<8>));
+        if (leaves == CWLeaves::blocks) {
+          EXPECT_EQ(c.stats.blocks, m.blocks.size());
+          EXPECT_EQ(c.stats.tri_bytes, m.stats.tri_bytes);
+        } else {
+          EXPECT_EQ(c.stats.blocks, c.iblocks.size());
+          EXPECT_EQ(c.stats.tri_bytes, c.iblocks.size() * sizeof(CWTriBlock));
+          EXPECT_TRUE(c.blocks.empty());
+        }
+        if (share < 1) {
+          EXPECT_LT(c.stats.box_growth, 0.2) << "quantized boxes far larger than the true ones";
+        }
       }
-      EXPECT_EQ(c.stats.node_bytes, c.nodes.size() * sizeof(CWNode) + c.full.size() * sizeof(MBVHNode<8>));
-      EXPECT_EQ(c.stats.blocks, m.blocks.size());
-      if (share < 1) {
-        EXPECT_LT(c.stats.box_growth, 0.2) << "quantized boxes far larger than the true ones";
-      }
-    }
   }
   EXPECT_THROW(CWBVH::compress(mbvh8_of(scenes[0]), 1.5), std::invalid_argument);
 }
@@ -427,9 +481,14 @@ TEST(CWBVH, OctantSlotsPutTheFirstEnteredChildInTheOctantsSlot) {
 // also at offsets.
 TEST(CWBVH, EveryChildOrderIsAccurateAndWatertight) {
   // Each order on the default uncompressed top (full_top=4), and the two ends of full_top.
-  for (const std::string order : {"sort", "branching", "octant", "sort+prefetch", "full_top=0", "full_top=100",
-                                  "octant,full_top=0"}) {
+  // Each also with indexed leaves.
+  for (const std::string variant : {"sort", "branching", "octant", "sort+prefetch", "full_top=0", "full_top=100",
+                                    "octant,full_top=0", "sort,indexed", "branching,indexed", "sort+prefetch,indexed",
+                                    "octant,full_top=0,indexed", "full_top=100,indexed"}) {
     SchemeConfig cfg;
+    const bool indexed = variant.ends_with(",indexed");
+    const std::string order = indexed ? variant.substr(0, variant.size() - 8) : variant;
+    if (indexed) cfg.params["leaves"] = "indexed";
     cfg.params["order"] = order == "sort+prefetch" ? "sort" : order.starts_with("octant") ? "octant" : order;
     if (order == "sort+prefetch") cfg.params["prefetch"] = "on";  // CWOrder::sort_prefetch
     if (order.starts_with("full_top")) cfg.params.erase("order");
@@ -439,15 +498,111 @@ TEST(CWBVH, EveryChildOrderIsAccurateAndWatertight) {
       Bench& bench = test::bench_for(scene);
       for (const char* w : {"primary", "rnd", "bounce:2"}) {
         const Accuracy a = test::accuracy_of(bench, "cwbvh_single", test::small_spec(w, 96), cfg);
-        EXPECT_LE(a.mismatches, 1u) << order << " on " << scene << " / " << w;
-        EXPECT_EQ(a.false_miss, 0u) << order << " leaks on " << scene << " / " << w;
+        EXPECT_LE(a.mismatches, 1u) << variant << " on " << scene << " / " << w;
+        EXPECT_EQ(a.false_miss, 0u) << variant << " leaks on " << scene << " / " << w;
       }
       // Hard cases (rays at shared vertices and edges): which triangle is reported is ambiguous
       // there (SchemeRobustness); a miss is not.
       for (const auto& w : hard_case_names()) {
         if (hard_case_must_hit(w)) {
           EXPECT_EQ(test::accuracy_of(bench, "cwbvh_single", test::small_spec(w, 96), cfg).false_miss, 0u)
-              << order << " leaks on " << scene << " / " << w;
+              << variant << " leaks on " << scene << " / " << w;
+        }
+      }
+    }
+  }
+}
+
+// A soup of disconnected triangles: no vertex shared, so an indexed block holds at most 2 of them
+// and a leaf of 16 takes 8 blocks (the most a leaf can take; a node's leaves up to 64).
+Scene triangle_soup(uint32_t n, uint32_t seed) {
+  Scene s;
+  s.name = "soup";
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> at(-10.f, 10.f), off(-0.6f, 0.6f);
+  for (uint32_t i = 0; i < n; ++i) {
+    const Vec3 c{at(rng), at(rng), at(rng)};
+    for (int k = 0; k < 3; ++k) s.positions.push_back(c + Vec3{off(rng), off(rng), off(rng)});
+    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
+  }
+  s.ensure_views();
+  return s;
+}
+
+TEST(CWBVH, IndexedLeavesPackTriangleSoupsAndMeshes) {
+  for (const Scene& s : {triangle_soup(4000, 7), load_scene("sphere"), load_scene("stadium")}) {
+    SCOPED_TRACE(s.name);
+    MBVHBuildParams p;
+    p.sah_collapse = true, p.merge = 16, p.small = 0, p.bvh.max_leaf = 16;
+    const MBVH<8, 8> m = MBVH<8, 8>::collapse(s, BVH::build(s, p.bvh), p);
+    const CWBVH c = CWBVH::compress(m, 0.04, CWSlots::mbvh, CWLeaves::indexed);
+    check_same_tree(m, c, CWSlots::mbvh);
+    // A block other than a leaf's last closes only when a triangle left does not fit: its 8
+    // lanes are full, or its table holds at least 6 vertices (a triangle adds at most 3).
+    uint32_t lanes = 0, blocks_of_two = 0;
+    for (size_t b = 0; b < c.iblocks.size(); ++b) {
+      const CWTriBlock& k = c.iblocks[b];
+      lanes += k.lanes;
+      blocks_of_two += k.lanes == 2;
+      uint32_t used = 0;
+      for (int l = 0; l < k.lanes; ++l)
+        for (int q = 0; q < 3; ++q) used |= 1u << k.idx[q][l];
+      EXPECT_EQ(used, (1u << std::popcount(used)) - 1) << "block " << b << ": table slots not used in order";
+      if (!k.last) {
+        EXPECT_TRUE(k.lanes == 8 || std::popcount(used) >= 6) << "block " << b << " closed early";
+      }
+    }
+    EXPECT_EQ(lanes, [&] {
+      uint32_t n = 0;
+      for (size_t b = 0; b < m.blocks.size(); ++b)
+        for (int l = 0; l < 8; ++l) n += l == 0 || m.blocks[b].prim[l] != m.blocks[b].prim[l - 1] ? 1 : 0;
+      return n;
+    }());
+    if (s.name == "soup") {
+      EXPECT_GT(blocks_of_two, c.iblocks.size() / 2) << "a soup's blocks hold two triangles";
+    } else {
+      EXPECT_LT(c.stats.tri_bytes, m.stats.tri_bytes * 3 / 4) << "a mesh's indexed leaves take under 0.75x the bytes";
+    }
+  }
+}
+
+// Indexed leaves change where a triangle is stored, never what a ray hits: the same distance as the
+// MBVH8's blocks on every ray, and the same u, v bit for bit where the same triangle is reported
+// (another may be where two give that distance: a ray starting on a shared vertex), on meshes, a
+// soup and at offsets; on the must-hit hard cases as many leaks as the blocks (none on a mesh;
+// a soup has no shared edges to be watertight across).
+TEST(CWBVH, IndexedLeavesHitWhatBlockLeavesHit) {
+  for (const std::string scene : {"room", "stadium", "sphere@148376,1234,-223423", "soup"}) {
+    SCOPED_TRACE(scene);
+    Bench& bench = scene == "soup" ? [] () -> Bench& {
+      static Bench b(triangle_soup(3000, 11));
+      return b;
+    }() : test::bench_for(scene);
+    for (const std::string order : {"auto", "branching", "sort"}) {
+      SchemeConfig blocks, indexed;
+      blocks.params["order"] = indexed.params["order"] = order;
+      blocks.params["leaves"] = "blocks", indexed.params["leaves"] = "indexed";
+      auto tb = make_scheme("cwbvh_single", blocks), ti = make_scheme("cwbvh_single", indexed);
+      tb->prepare(bench.scene(), bench.cache()), ti->prepare(bench.scene(), bench.cache());
+      std::vector<std::string> workloads = {"primary", "rnd", "bounce:2", "shadow"};
+      for (const auto& h : hard_case_names()) workloads.push_back(h);
+      for (const std::string& w : workloads) {
+        const RayBatch& rays = bench.rays(test::small_spec(w, 64));
+        std::vector<Hit> hb(rays.size()), hi(rays.size());
+        trace_batch(*tb, rays, hb, 2), trace_batch(*ti, rays, hi, 2);
+        uint32_t differ = 0;
+        for (size_t i = 0; i < rays.size(); ++i) {
+          // == : a ray starting on a vertex may report +0 from one triangle and -0 from another.
+          differ += !(hb[i].t == hi[i].t);
+          if (hb[i].prim == hi[i].prim) {
+            differ += std::bit_cast<uint32_t>(hb[i].u) != std::bit_cast<uint32_t>(hi[i].u) ||
+                      std::bit_cast<uint32_t>(hb[i].v) != std::bit_cast<uint32_t>(hi[i].v);
+          }
+        }
+        EXPECT_EQ(differ, 0u) << order << " / " << w;
+        if (hard_case_must_hit(w)) {
+          EXPECT_EQ(test::accuracy_of(bench, "cwbvh_single", test::small_spec(w, 64), indexed).false_miss,
+                    test::accuracy_of(bench, "cwbvh_single", test::small_spec(w, 64), blocks).false_miss);
         }
       }
     }

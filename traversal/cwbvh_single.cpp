@@ -24,7 +24,16 @@
 // more instructions than sort (2629 vs 2431; docs/PERFORMANCE.md, session 9). Whatever the order,
 // popped children whose entry distance is not below the closest hit are skipped, so the order
 // changes the work, never the hits' distances.
-// Leaves are the MBVH8's 8-wide triangle blocks under the watertight SIMD test.
+// Leaves (`leaves`): indexed by default (structures/cwbvh.h, CWTriBlock: up to 8 triangles over a
+// table of up to 8 distinct vertices, 160 bytes; Benthin et al. 2018 compress leaves as well as
+// nodes), tested by indexed_block_intersect (the watertight test on the table, permuted to the
+// corners: the same values as on the MBVH8's blocks); `blocks` keeps the MBVH8's 8-wide blocks
+// (320 bytes). The triangles are most of the structure (spheres:2M: 122 MB of blocks against 16 MB
+// of MBVH8 nodes), so node compression alone left most of the bytes: indexed leaves take
+// 0.59-0.63x the triangle bytes and, beyond the last-level cache, cwbvh_single / mbvh8_single on
+// bounce:2 rays rose from 1.04 to 1.11 (spheres:2M) and on primary rays from 0.99 to 1.01
+// (spheres:10M); on cached scenes whose blocks split (quads: conference, 18% more blocks) 2-7%
+// below `blocks` (docs/PERFORMANCE.md, session 32).
 // The tree is the SAH-collapsed MBVH8 (same parameters as mbvh8_single, leaves of at most 16
 // triangles), re-laid out and quantized; `full_top` percent of its nodes, those of largest box
 // area, stay MBVH8 nodes (structures/cwbvh.h, "Uncompressed top"; Benthin et al. 2018's
@@ -62,7 +71,7 @@ inline uintptr_t cw_node_address(const CWBVH& t, uint32_t ref) {
 // (box_test on cw_full_ray's constants, the same as `r`'s), a compressed node
 // the fused test on 8-bit planes; what follows the test (ordering, push, prefetch) is the same
 // code, instantiated per kind with the node's reference getters.
-template <CWOrder O, bool ExpAdd, class P>
+template <CWOrder O, bool ExpAdd, bool Indexed, class P>
 void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, MBVHStackEntry* stack, P& probe) {
   using S = simd::V<8>;
   const CWNode* nodes = t.nodes.data();
@@ -105,10 +114,11 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
         if constexpr (O == CWOrder::sort_prefetch) {
           uint32_t second;
           push_sorted8(rv, tn, entered, count, stack + sp, &second);
-          prefetch_node_or_block(cw_node_address(t, second),
-                                 reinterpret_cast<uintptr_t>(t.blocks.data()) +
-                                     uintptr_t(mbvh_ref::first_block(cw_leaf_to_mbvh(second))) * sizeof(TriBlock<8>),
-                                 mbvh_ref::is_leaf(second));
+          const uintptr_t block =
+              Indexed ? reinterpret_cast<uintptr_t>(t.iblocks.data()) + uintptr_t(cw_ileaf_block(second)) * sizeof(CWTriBlock)
+                      : reinterpret_cast<uintptr_t>(t.blocks.data()) +
+                            uintptr_t(mbvh_ref::first_block(cw_leaf_to_mbvh(second))) * sizeof(TriBlock<8>);
+          prefetch_node_or_block(cw_node_address(t, second), block, mbvh_ref::is_leaf(second));
         } else {
           push_sorted8(rv, tn, entered, count, stack + sp);
         }
@@ -141,9 +151,20 @@ void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, 
           continue;
       }
     } else {
-      const uint32_t leaf = cw_leaf_to_mbvh(cur);
-      probe_leaf<8>(t.blocks.data(), leaf, probe, 1);
-      leaf_test<8, TriKernel::watertight>(t.blocks.data(), nullptr, tr, nullptr, leaf, hit);
+      if constexpr (Indexed) {
+        uint32_t k = cw_ileaf_block(cur);
+        probe.leaf(&t.iblocks[k], 0, 1);
+        for (;; ++k) {
+          const CWTriBlock& b = t.iblocks[k];
+          probe.tris(&b, sizeof(CWTriBlock), b.lanes);
+          indexed_block_intersect(tr, b, hit);
+          if (b.last) break;
+        }
+      } else {
+        const uint32_t leaf = cw_leaf_to_mbvh(cur);
+        probe_leaf<8>(t.blocks.data(), leaf, probe, 1);
+        leaf_test<8, TriKernel::watertight>(t.blocks.data(), nullptr, tr, nullptr, leaf, hit);
+      }
       tfar = hit.t;
       tfar8 = _mm256_set1_ps(tfar);
     }
@@ -157,7 +178,8 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
       : cfg_(cfg),
         params_(mbvh_params(cfg, kDefaults)),
         order_(parse_order_param(cfg.get_choice("order"))),
-        full_percent_(cfg.get_int("full_top")) {
+        full_percent_(cfg.get_int("full_top")),
+        leaves_(cfg.get_choice("leaves") == "indexed" ? CWLeaves::indexed : CWLeaves::blocks) {
     if (params_.merge > 16) throw InputError("merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
     if (params_.bvh.max_leaf > 16) throw InputError("leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
   }
@@ -168,8 +190,8 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
     // the MBVH8's slot order).
     const CWSlots slots = order_ == OrderParam::octant ? CWSlots::octant : CWSlots::mbvh;
     cw_ = cache.get<CWBVH>(params_.key(8, 8) + ":full" + std::to_string(full_percent_) +
-                               (slots == CWSlots::octant ? ":octant" : ""),
-                           [&] { return CWBVH::compress(*m.mbvh, full_percent_ / 100.0, slots); });
+                               (slots == CWSlots::octant ? ":octant" : "") + (leaves_ == CWLeaves::indexed ? ":indexed" : ""),
+                           [&] { return CWBVH::compress(*m.mbvh, full_percent_ / 100.0, slots, leaves_); });
     prefetch_ = prefetch_second_child(cfg_, memory().total());
   }
   std::string structure_info() const override { return cw_->stats.describe() + prefetch_info(prefetch_); }
@@ -185,15 +207,22 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
                                                           : CWOrder::sort;
     const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
     for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
-      if (t.blocks.empty()) return;  // an empty scene: nothing to hit
+      if (t.stats.blocks == 0) return;  // an empty scene: nothing to hit
       const RayCtx rc(ray, axes);
       const CWRay cr(rc, ray.tmin, t.coord_bound, t.e_min, t.e_max);
       const TriRay<8> tr(rc, ray.tmin);
       const auto go = [&]<CWOrder O>() {
+        const auto leaves = [&]<bool ExpAdd>() {
+          if (t.leaves == CWLeaves::indexed) {
+            cw_traverse<O, ExpAdd, true>(t, cr, tr, hit, stack.data(), probe);
+          } else {
+            cw_traverse<O, ExpAdd, false>(t, cr, tr, hit, stack.data(), probe);
+          }
+        };
         if (cr.exp_add) {
-          cw_traverse<O, true>(t, cr, tr, hit, stack.data(), probe);
+          leaves.template operator()<true>();
         } else {
-          cw_traverse<O, false>(t, cr, tr, hit, stack.data(), probe);
+          leaves.template operator()<false>();
         }
       };
       if (order == CWOrder::branching) {
@@ -214,6 +243,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   std::shared_ptr<const CWBVH> cw_;
   OrderParam order_;
   int full_percent_;       // full_top: percent of the nodes kept uncompressed
+  CWLeaves leaves_;
   bool prefetch_ = false;  // sorted batches take CWOrder::sort_prefetch (decided in prepare)
 };
 
@@ -230,7 +260,10 @@ ParamSpecs params_cwbvh_single() {
                                  "layout's octant-ordered slots (slot ^ ray octant, a table lookup, no sort)"),
                     int_param("full_top", 4, 0, 100,
                               "percent of the nodes kept uncompressed (MBVH8 nodes, float boxes), the largest "
-                              "boxes first (Benthin et al. 2018's compressed-leaf BVH): 0 = every node compressed")} +
+                              "boxes first (Benthin et al. 2018's compressed-leaf BVH): 0 = every node compressed"),
+                    choice_param("leaves", "indexed", {"blocks", "indexed"},
+                                 "leaf triangles: blocks = the MBVH8's 8-wide blocks (320 bytes), indexed = "
+                                 "blocks of up to 8 triangles over a table of up to 8 distinct vertices (160 bytes)")} +
          prefetch_param_specs();
 }
 

@@ -220,4 +220,32 @@ template <bool ExpAdd = false>
   return ((n.imask >> s & 1) ? n.child_base : n.leaf_base) + n.meta[s];
 }
 
+// The watertight test on an indexed leaf block (structures/cwbvh.h, CWTriBlock): parts (1)-(2) of
+// the kernel library's test run on the block's vertex table — origin subtraction and shear once per
+// table vertex — and each corner of each lane is a permute of the results by its index, so every
+// lane sees the values block_intersect computes from a TriBlock<8> holding the same triangles (bit
+// for bit: the same float operations on the same floats). Part (3) is block_candidates.
+[[gnu::noinline]] inline bool indexed_block_intersect(const TriRay<8>& r, const CWTriBlock& b, Hit& hit) {
+  using S = simd::V<8>;
+  const __m256 Z = S::sub(S::load(b.v[r.kz]), r.oz);
+  const __m256 X = shear<8>(S::sub(S::load(b.v[r.kx]), r.ox), r.sx, Z);
+  const __m256 Y = shear<8>(S::sub(S::load(b.v[r.ky]), r.oy), r.sy, Z);
+  const auto corner = [&](int c) { return _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(b.idx[c]))); };
+  const __m256i ia = corner(0), ib = corner(1), ic = corner(2);
+  const __m256 Az = _mm256_permutevar8x32_ps(Z, ia), Bz = _mm256_permutevar8x32_ps(Z, ib), Cz = _mm256_permutevar8x32_ps(Z, ic);
+  __m256 U, Vv, Ww, det;
+  int m = S::mask(watertight_inside<8>(_mm256_permutevar8x32_ps(X, ia), _mm256_permutevar8x32_ps(Y, ia),
+                                       _mm256_permutevar8x32_ps(X, ib), _mm256_permutevar8x32_ps(Y, ib),
+                                       _mm256_permutevar8x32_ps(X, ic), _mm256_permutevar8x32_ps(Y, ic), U, Vv, Ww, det));
+  if (!m) return false;
+  m &= int(lane_bits(b.lanes));
+  return block_candidates<8>(
+      r, m, U, Vv, Ww, det, Az, Bz, Cz,
+      [&](int l, int c) {
+        const uint32_t i = b.idx[c][l];
+        return Vec3D<double>{b.v[0][i], b.v[1][i], b.v[2][i]};
+      },
+      [&](int l) { return b.prim[l]; }, hit);
+}
+
 }  // namespace tb

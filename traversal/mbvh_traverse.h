@@ -192,6 +192,52 @@ template <int W>
 constexpr uint32_t block_tris(uint32_t ntris, uint32_t k) { return std::min<uint32_t>(W, ntris - k * W); }
 constexpr uint32_t lane_bits(uint32_t n) { return (1u << n) - 1; }
 
+// Part (3) of the W-wide watertight test for the lanes `m` that passed parts (1)-(2) (usually none
+// or one per block): exact_plane_distance's plane equation in double (plane_terms), the sheared
+// distance only for a ray in the triangle's plane. vert(l, c) is lane l's corner c in double and
+// prim(l) its scene triangle, however the block stores them (TriBlock, or the indexed CWTriBlock of
+// structures/cwbvh.h). On a hit with tmin <= t < hit.t records the closest (the first lane on ties)
+// and returns true.
+template <int W, int RW, class Vert, class Prim>
+[[gnu::always_inline]] inline bool block_candidates(const TriRay<RW>& r, int m, typename simd::V<W>::f U,
+                                                    typename simd::V<W>::f Vv, typename simd::V<W>::f Ww,
+                                                    typename simd::V<W>::f det, typename simd::V<W>::f Az,
+                                                    typename simd::V<W>::f Bz, typename simd::V<W>::f Cz, Vert&& vert,
+                                                    Prim&& prim, Hit& hit) {
+  using S = simd::V<W>;
+  alignas(32) float us[W], vs[W], ws[W], dets[W];
+  S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
+  bool found = false;
+  for (; m; m &= m - 1) {
+    const int l = std::countr_zero(unsigned(m));
+    // The ray's current closest hit again (a spatial-split tree references a big triangle from
+    // every leaf it was split into, and the leaves along a ray repeat it): the same vertices
+    // give the same t, which cannot be closer, so its double evaluation is skipped. Plain trees:
+    // +-0.03% instructions; stadium with spatial=1: primary -3.7%, mispredictions -21% (callgrind).
+    const uint32_t p = prim(l);
+    if (p == hit.prim) continue;
+    const Vec3D<double> v0 = vert(l, 0);
+    double num, dn;
+    plane_terms(plane_normal(v0, vert(l, 1), vert(l, 2)), v0, to_double(r.org), to_double(r.dir), num, dn);
+    const float inv_det = 1.f / dets[l];
+    float t;
+    if (dn != 0.0) [[likely]] {
+      t = float(num / dn);
+    } else {
+      alignas(32) float azs[W], bzs[W], czs[W];
+      S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
+      t = sheared_distance<1>(r.szs, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det);
+    }
+    if (!(t >= r.tmin && t < hit.t)) continue;
+    hit.t = t;
+    hit.u = vs[l] * inv_det;
+    hit.v = ws[l] * inv_det;
+    hit.prim = p;
+    found = true;
+  }
+  return found;
+}
+
 // The watertight test of the kernel library on W triangles at once (one ray, W lanes): the same
 // float operations in the same order per lane as intersect_watertight, so its watertightness
 // carries over. On a hit with tmin <= t < hit.t records the closest (the first lane on ties, as a
@@ -223,40 +269,10 @@ template <int W, int RW = W>
   // Without a branch: `if (tris < W)` mispredicted 0.33 times per bunny bounce:2 ray (callgrind);
   // branch-free, mbvh8_single +0.6 to +1.2% on bounce:2 of 5 of 6 scenes (session 21).
   m &= int(lane_bits(std::min<uint32_t>(tris, W)));
-  // The candidates (usually none or one per block): exact_plane_distance's plane equation in
-  // double (plane_terms), the sheared distance only for a ray in the triangle's plane.
-  alignas(32) float us[W], vs[W], ws[W], dets[W];
-  S::store(us, U), S::store(vs, Vv), S::store(ws, Ww), S::store(dets, det);
-  bool found = false;
-  for (; m; m &= m - 1) {
-    const int l = std::countr_zero(unsigned(m));
-    // The ray's current closest hit again (a spatial-split tree references a big triangle from
-    // every leaf it was split into, and the leaves along a ray repeat it): the same vertices
-    // give the same t, which cannot be closer, so its double evaluation is skipped. Plain trees:
-    // +-0.03% instructions; stadium with spatial=1: primary -3.7%, mispredictions -21% (callgrind).
-    if (b.prim[l] == hit.prim) continue;
-    const Vec3D<double> v0{b.v[0][0][l], b.v[0][1][l], b.v[0][2][l]};
-    double num, dn;
-    plane_terms(plane_normal(v0, Vec3D<double>{b.v[1][0][l], b.v[1][1][l], b.v[1][2][l]},
-                             Vec3D<double>{b.v[2][0][l], b.v[2][1][l], b.v[2][2][l]}),
-                v0, to_double(r.org), to_double(r.dir), num, dn);
-    const float inv_det = 1.f / dets[l];
-    float t;
-    if (dn != 0.0) [[likely]] {
-      t = float(num / dn);
-    } else {
-      alignas(32) float azs[W], bzs[W], czs[W];
-      S::store(azs, Az), S::store(bzs, Bz), S::store(czs, Cz);
-      t = sheared_distance<1>(r.szs, us[l], vs[l], ws[l], azs[l], bzs[l], czs[l], inv_det);
-    }
-    if (!(t >= r.tmin && t < hit.t)) continue;
-    hit.t = t;
-    hit.u = vs[l] * inv_det;
-    hit.v = ws[l] * inv_det;
-    hit.prim = b.prim[l];
-    found = true;
-  }
-  return found;
+  return block_candidates<W>(
+      r, m, U, Vv, Ww, det, Az, Bz, Cz,
+      [&](int l, int c) { return Vec3D<double>{b.v[c][0][l], b.v[c][1][l], b.v[c][2][l]}; },
+      [&](int l) { return b.prim[l]; }, hit);
 }
 
 // Tests the triangles of leaf `ref` in an array of W-wide blocks for one ray (a layout without
