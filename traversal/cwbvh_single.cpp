@@ -30,7 +30,7 @@
 // corners: the same values as on the MBVH8's blocks); `blocks` keeps the MBVH8's 8-wide blocks
 // (320 bytes). The triangles are most of the structure (spheres:2M: 122 MB of blocks against 16 MB
 // of MBVH8 nodes), so node compression alone left most of the bytes: indexed leaves take
-// 0.59-0.63x the triangle bytes and, beyond the last-level cache, cwbvh_single / mbvh8_single on
+// 0.59-0.66x the triangle bytes and, beyond the last-level cache, cwbvh_single / mbvh8_single on
 // bounce:2 rays rose from 1.04 to 1.11 (spheres:2M) and on primary rays from 0.99 to 1.01
 // (spheres:10M); on cached scenes whose blocks split (quads: conference, 18% more blocks) 2-7%
 // below `blocks` (docs/PERFORMANCE.md, session 32).
