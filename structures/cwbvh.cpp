@@ -166,50 +166,54 @@ uint32_t append_indexed_leaf(const MBVH<8, 8>& m, uint32_t ref, aligned_vector<C
     uint32_t bits[3][3];  // corner, axis
     uint32_t prim;
   };
+  // Fixed arrays, no allocation per leaf (compress runs this for every leaf of the tree).
   const uint32_t ntris = mbvh_ref::num_tris(ref), first = mbvh_ref::first_block(ref);
-  std::vector<Tri> left;
+  std::array<Tri, 16> left;  // compress refuses leaves of more than 16 triangles
+  uint32_t nleft = 0;
   for (uint32_t t = 0; t < ntris; ++t) {
     const TriBlock<8>& b = m.blocks[first + t / 8];
-    Tri tri;
+    Tri& tri = left[nleft++];
     for (int c = 0; c < 3; ++c)
       for (int a = 0; a < 3; ++a) tri.bits[c][a] = std::bit_cast<uint32_t>(b.v[c][a][t % 8]);
     tri.prim = b.prim[t % 8];
-    left.push_back(tri);
   }
+  const auto same = [](const uint32_t (&a)[3], const uint32_t (&b)[3]) { return a[0] == b[0] && a[1] == b[1] && a[2] == b[2]; };
   uint32_t made = 0;
-  while (!left.empty()) {
+  while (nleft) {
     CWTriBlock blk{};
-    std::vector<std::array<uint32_t, 3>> table;
+    uint32_t table[8][3], nv = 0;
     const auto slot_of = [&](const uint32_t (&v)[3]) {
-      for (size_t i = 0; i < table.size(); ++i)
-        if (table[i][0] == v[0] && table[i][1] == v[1] && table[i][2] == v[2]) return int(i);
+      for (uint32_t i = 0; i < nv; ++i)
+        if (same(table[i], v)) return int(i);
       return -1;
     };
     const auto new_vertices = [&](const Tri& t) {
-      int n = 0;
+      uint32_t n = 0;
       for (int c = 0; c < 3; ++c) {
         bool dup = slot_of(t.bits[c]) >= 0;
-        for (int d = 0; d < c && !dup; ++d) dup = std::equal(t.bits[c], t.bits[c] + 3, t.bits[d]);
+        for (int d = 0; d < c && !dup; ++d) dup = same(t.bits[c], t.bits[d]);
         n += !dup;
       }
       return n;
     };
     uint32_t lanes = 0;
-    for (;;) {
-      int best = -1, best_new = 4;
-      for (size_t i = 0; i < left.size(); ++i) {
-        const int n = new_vertices(left[i]);
-        if (table.size() + size_t(n) <= 8 && n < best_new) best = int(i), best_new = n;
+    while (lanes < 8) {
+      int best = -1;
+      uint32_t best_new = 4;
+      for (uint32_t i = 0; i < nleft; ++i) {
+        const uint32_t n = new_vertices(left[i]);
+        if (nv + n <= 8 && n < best_new) best = int(i), best_new = n;
         if (lanes == 0) break;  // a block starts with the first triangle left
       }
-      if (best < 0 || lanes == 8) break;
+      if (best < 0) break;
       const Tri t = left[size_t(best)];
-      left.erase(left.begin() + best);
+      std::copy(left.begin() + best + 1, left.begin() + nleft, left.begin() + best);
+      --nleft;
       for (int c = 0; c < 3; ++c) {
         int sl = slot_of(t.bits[c]);
         if (sl < 0) {
-          sl = int(table.size());
-          table.push_back({t.bits[c][0], t.bits[c][1], t.bits[c][2]});
+          sl = int(nv);
+          std::copy(t.bits[c], t.bits[c] + 3, table[nv++]);
         }
         blk.idx[c][lanes] = uint8_t(sl);
       }
@@ -221,8 +225,8 @@ uint32_t append_indexed_leaf(const MBVH<8, 8>& m, uint32_t ref, aligned_vector<C
       for (int c = 0; c < 3; ++c) blk.idx[c][l] = blk.idx[c][lanes - 1];
       blk.prim[l] = blk.prim[lanes - 1];
     }
-    for (int a = 0; a < 3; ++a)
-      for (size_t i = 0; i < 8; ++i) blk.v[a][i] = std::bit_cast<float>(table[i < table.size() ? i : 0][size_t(a)]);
+    for (int a = 0; a < 3; ++a)  // unused table slots repeat slot 0 (finite, never indexed)
+      for (uint32_t i = 0; i < 8; ++i) blk.v[a][i] = std::bit_cast<float>(table[i < nv ? i : 0][a]);
     out.push_back(blk);
     ++made;
   }
