@@ -3,8 +3,9 @@
 // node array, the simulated memory reads per ray (the --cache hierarchy, default
 // l1=32K:8,l2=256K:8,l3=2M:16, thesis §5.4) and the speed, for primary rays and bounce:2. On a
 // scene whose nodes exceed the simulated L3 the memory reads show what the compressed nodes
-// (cwbvh_single) and the treelet queues (treelet_queue) save against mbvh8_single, mbvh_rs and
-// raygrid.
+// (cwbvh_single) and the treelet queues (treelet_queue, on the compressed tree by default, and
+// `treelet_queue:tree=mbvh8`, the reordering alone on mbvh8_single's tree) save against
+// mbvh8_single, mbvh_rs and raygrid.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -28,7 +29,7 @@ int bandwidth_table(const TableOptions& opt) {
   const int rounds = std::max(1, run.reps);
   run.reps = 1;  // measure_cell's own timing is replaced by the interleaved rounds below
   const std::vector<std::string> names =
-      default_schemes(opt, {"mbvh8_single", "cwbvh_single", "treelet_queue", "mbvh_rs", "raygrid"});
+      default_schemes(opt, {"mbvh8_single", "cwbvh_single", "treelet_queue", "treelet_queue:tree=mbvh8", "mbvh_rs", "raygrid"});
   const std::vector<std::string> workloads = {"primary", "bounce:2"};
   std::vector<std::unique_ptr<Traverser>> schemes;
   for (const auto& name : names) {

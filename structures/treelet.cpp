@@ -21,17 +21,23 @@ float half_area(const AABB& b) {
   return d.x * d.y + d.y * d.z + d.z * d.x;
 }
 
-}  // namespace
 
+// The tree as the partition reads it: interior nodes by a dense index (0..nodes()-1), the root's
+// root(); children(n, f) calls f(dense index, box half-area) for each interior child of n; cost(n)
+// is n's bytes plus its leaf children's blocks; assign(t, n, id) puts n and those blocks in
+// treelet id.
 template <int N, int W>
-Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
-  Treelets t;
-  t.small_leaf = m.small_leaf;
-  t.node_treelet.assign(m.nodes.size(), UINT32_MAX);
-  t.block_treelet.assign(m.blocks.size(), UINT32_MAX);
-  t.small_treelet.assign(m.small.size(), UINT32_MAX);
-  // Bytes a node brings into its treelet: itself and the blocks of its leaf children.
-  auto node_cost = [&](uint32_t n) {
+struct MBVHTree {
+  const MBVH<N, W>& m;
+  size_t nodes() const { return m.nodes.size(); }
+  uint32_t root() const { return 0; }
+  template <class F>
+  void children(uint32_t n, F&& f) const {
+    const auto& nd = m.nodes[n];
+    for (uint32_t k = 0; k < nd.num_children; ++k)
+      if (!mbvh_ref::is_leaf(nd.ref[k])) f(nd.ref[k], half_area(nd.child_box(int(k))));
+  }
+  size_t cost(uint32_t n) const {
     size_t b = sizeof(MBVHNode<N>);
     const auto& nd = m.nodes[n];
     for (uint32_t c = 0; c < nd.num_children; ++c) {
@@ -41,8 +47,8 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
       b += k <= m.small_leaf ? sizeof(TriBlock<4>) : (k + W - 1) / W * sizeof(TriBlock<W>);
     }
     return b;
-  };
-  auto assign = [&](uint32_t n, uint32_t id) {
+  }
+  void assign(Treelets& t, uint32_t n, uint32_t id) const {
     t.node_treelet[n] = id;
     const auto& nd = m.nodes[n];
     for (uint32_t c = 0; c < nd.num_children; ++c) {
@@ -53,22 +59,70 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
       else
         for (uint32_t j = 0; j < (k + W - 1) / W; ++j) t.block_treelet[first + j] = id;
     }
-  };
-  if (m.nodes.empty()) return t;
-  // Subtree bytes, children before parents (a breadth-first order, reversed).
-  std::vector<uint32_t> order{0};
-  for (size_t i = 0; i < order.size(); ++i) {
-    const auto& nd = m.nodes[order[i]];
-    for (uint32_t k = 0; k < nd.num_children; ++k)
-      if (!mbvh_ref::is_leaf(nd.ref[k])) order.push_back(nd.ref[k]);
   }
-  std::vector<size_t> subtree(m.nodes.size(), 0);
+};
+
+// A CWBVH: compressed nodes 0..nodes.size()-1, then its full nodes; children and leaves through
+// CWBVH's reference getters (child_ref gives block leaves in the MBVH's encoding).
+struct CWTree {
+  const CWBVH& c;
+  size_t nodes() const { return c.nodes.size() + c.full.size(); }
+  uint32_t ref_of(uint32_t n) const { return n < c.nodes.size() ? n : kCWFull | uint32_t(n - c.nodes.size()); }
+  uint32_t dense(uint32_t ref) const { return (ref & kCWFull) ? uint32_t(c.nodes.size()) + (ref & ~kCWFull) : ref; }
+  uint32_t root() const { return dense(c.root); }
+  // Calls f(slot, child reference) for each used slot of n.
+  template <class F>
+  void slots(uint32_t n, F&& f) const {
+    const uint32_t ref = ref_of(n);
+    for (int s = 0; s < 8; ++s)
+      if (c.slot_used(ref, s)) f(s, c.child_ref(ref, s));
+  }
+  // Calls f(first block, block count) for each leaf child of n.
+  template <class F>
+  void leaves(uint32_t n, F&& f) const {
+    slots(n, [&](int, uint32_t r) {
+      if (!mbvh_ref::is_leaf(r)) return;
+      if (c.leaves == CWLeaves::indexed) {
+        uint32_t k = cw_ileaf_block(r), first = k;
+        while (!c.iblocks[k].last) ++k;
+        f(first, k - first + 1);
+      } else {
+        f(mbvh_ref::first_block(r), (mbvh_ref::num_tris(r) + 7) / 8);
+      }
+    });
+  }
+  template <class F>
+  void children(uint32_t n, F&& f) const {
+    slots(n, [&](int s, uint32_t r) {
+      if (!mbvh_ref::is_leaf(r)) f(dense(r), half_area(c.child_box(ref_of(n), s)));
+    });
+  }
+  size_t cost(uint32_t n) const {
+    size_t b = n < c.nodes.size() ? sizeof(CWNode) : sizeof(MBVHNode<8>);
+    const size_t block = c.leaves == CWLeaves::indexed ? sizeof(CWTriBlock) : sizeof(TriBlock<8>);
+    leaves(n, [&](uint32_t, uint32_t count) { b += count * block; });
+    return b;
+  }
+  void assign(Treelets& t, uint32_t n, uint32_t id) const {
+    t.node_treelet[n] = id;
+    leaves(n, [&](uint32_t first, uint32_t count) {
+      for (uint32_t j = 0; j < count; ++j) t.block_treelet[first + j] = id;
+    });
+  }
+};
+
+template <class Tree>
+void partition_tree(const Tree& tree, size_t budget, Treelets& t) {
+  t.node_treelet.assign(tree.nodes(), UINT32_MAX);
+  if (tree.nodes() == 0) return;
+  // Subtree bytes, children before parents (a breadth-first order, reversed).
+  std::vector<uint32_t> order{tree.root()};
+  for (size_t i = 0; i < order.size(); ++i) tree.children(order[i], [&](uint32_t k, float) { order.push_back(k); });
+  std::vector<size_t> subtree(tree.nodes(), 0);
   for (size_t i = order.size(); i-- > 0;) {
     const uint32_t n = order[i];
-    subtree[n] += node_cost(n);
-    const auto& nd = m.nodes[n];
-    for (uint32_t k = 0; k < nd.num_children; ++k)
-      if (!mbvh_ref::is_leaf(nd.ref[k])) subtree[n] += subtree[nd.ref[k]];
+    subtree[n] += tree.cost(n);
+    tree.children(n, [&](uint32_t k, float) { subtree[n] += subtree[k]; });
   }
   // With 8-wide nodes the frontier a full treelet leaves is wide and mostly small subtrees; each
   // of its own would make treelets of a node or two (measured: 895 treelets for 1334 nodes on
@@ -77,7 +131,7 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
   // only a subtree larger than the budget grows a treelet greedily, skipping candidates that no
   // longer fit so the treelet fills up. Packed treelets are unions of whole sibling subtrees
   // (not connected); a ray still changes queue only where it crosses a treelet's edge.
-  std::deque<uint32_t> roots{0};
+  std::deque<uint32_t> roots{tree.root()};
   uint32_t pack = UINT32_MAX;
   while (!roots.empty()) {
     const uint32_t root = roots.front();
@@ -88,10 +142,8 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
       while (!todo.empty()) {
         const uint32_t n = todo.back();
         todo.pop_back();
-        assign(n, pack);
-        const auto& nd = m.nodes[n];
-        for (uint32_t k = 0; k < nd.num_children; ++k)
-          if (!mbvh_ref::is_leaf(nd.ref[k])) todo.push_back(nd.ref[k]);
+        tree.assign(t, n, pack);
+        tree.children(n, [&](uint32_t k, float) { todo.push_back(k); });
       }
       t.bytes[pack] += subtree[root];
       continue;
@@ -105,16 +157,14 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
     while (!cand.empty()) {
       const uint32_t n = cand.top().second;
       cand.pop();
-      const size_t c = node_cost(n);
+      const size_t c = tree.cost(n);
       if (nodes > 0 && bytes + c > budget) {
         roots.push_back(n);  // the root of a later treelet
         continue;
       }
-      assign(n, id);
+      tree.assign(t, n, id);
       bytes += c, ++nodes;
-      const auto& nd = m.nodes[n];
-      for (uint32_t k = 0; k < nd.num_children; ++k)
-        if (!mbvh_ref::is_leaf(nd.ref[k])) cand.push({half_area(nd.child_box(int(k))), nd.ref[k]});
+      tree.children(n, [&](uint32_t k, float area) { cand.push({area, k}); });
     }
     t.bytes.push_back(bytes);
   }
@@ -124,7 +174,27 @@ Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
   size_t sum = 0;
   for (size_t b : t.bytes) sum += b;
   t.stats.avg_bytes = double(sum) / double(t.count());
-  t.stats.avg_nodes = double(m.nodes.size()) / double(t.count());
+  t.stats.avg_nodes = double(tree.nodes()) / double(t.count());
+}
+
+}  // namespace
+
+template <int N, int W>
+Treelets Treelets::partition(const MBVH<N, W>& m, size_t budget) {
+  Treelets t;
+  t.small_leaf = m.small_leaf;
+  t.block_treelet.assign(m.blocks.size(), UINT32_MAX);
+  t.small_treelet.assign(m.small.size(), UINT32_MAX);
+  partition_tree(MBVHTree<N, W>{m}, budget, t);
+  return t;
+}
+
+Treelets Treelets::partition(const CWBVH& c, size_t budget) {
+  Treelets t;
+  t.full_offset = uint32_t(c.nodes.size());
+  t.cw_indexed = c.leaves == CWLeaves::indexed;
+  t.block_treelet.assign(t.cw_indexed ? c.iblocks.size() : c.blocks.size(), UINT32_MAX);
+  partition_tree(CWTree{c}, budget, t);
   return t;
 }
 

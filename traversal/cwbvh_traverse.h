@@ -248,4 +248,135 @@ template <bool ExpAdd = false>
       [&](int l) { return b.prim[l]; }, hit);
 }
 
+// sort_prefetch: sort, and the second-nearest entered child's node or first block lines fetched
+// after the push (as mbvh8_single's ChildOrder::sort_prefetch; `prefetch`).
+enum class CWOrder { branching, sort, sort_prefetch, octant };
+
+// The address of the node an interior reference names (either kind, structures/cwbvh.h), as an
+// integer: the prefetches below may form it for a leaf's reference, which is never dereferenced.
+inline uintptr_t cw_node_address(const CWBVH& t, uint32_t ref) {
+  return (ref & kCWFull) ? reinterpret_cast<uintptr_t>(t.full.data()) + uintptr_t(ref & ~(kCWFull | mbvh_ref::kLeaf)) * sizeof(MBVHNode<8>)
+                         : reinterpret_cast<uintptr_t>(t.nodes.data()) + uintptr_t(ref & ~mbvh_ref::kLeaf) * sizeof(CWNode);
+}
+
+// One traversal for both node kinds: a full node (kCWFull) takes the MBVH8's fused node test
+// (box_test on cw_full_ray's constants, the same as `r`'s), a compressed node
+// the fused test on 8-bit planes; what follows the test (ordering, push, prefetch) is the same
+// code, instantiated per kind with the node's reference getters.
+// Runs from `at` (the root with an empty stack, or where a suspended traversal left off) as
+// mbvh_traverse_from does: before each visit `leave(ref)` may suspend the ray (`at` then holds
+// the reference it was about to visit and its stack depth; false is returned), and resumed with
+// the same `at`, stack and hit it visits exactly what an unsuspended traversal would
+// (treelet_queue with `tree=cwbvh`). True: done.
+template <CWOrder O, bool ExpAdd, bool Indexed, class P, class Leave>
+bool cw_traverse_from(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, MBVHCursor& at, Hit& hit,
+                      MBVHStackEntry* stack, P& probe, Leave&& leave) {
+  using S = simd::V<8>;
+  const CWNode* nodes = t.nodes.data();
+  const MBVHNode<8>* full = t.full.data();
+  uint32_t sp = at.sp, cur = at.cur;
+  float tfar = hit.t;
+  __m256 tfar8 = _mm256_set1_ps(tfar);  // changes only at a leaf
+  // The entered children (mask non-zero) of the node just tested: `refs` gives the 8 references as
+  // a vector, ref(i) slot i's. Sets cur (and sp); false: none entered.
+  const auto descend = [&](const __m256 entered, const __m256 tn, auto&& refs, auto&& ref) {
+    const int mask = S::mask(entered);
+    if (!mask) return false;
+    if constexpr (O == CWOrder::branching) {
+      const auto prefetch = [&](uint32_t c) {
+        if (mbvh_ref::is_leaf(c)) return;
+        const char* a = reinterpret_cast<const char*>(cw_node_address(t, c));
+        if (c & kCWFull) {
+          for (size_t l = 0; l < sizeof(MBVHNode<8>); l += 64) _mm_prefetch(a + l, _MM_HINT_T0);
+        } else {  // 80 bytes, 16-aligned: two lines
+          _mm_prefetch(a, _MM_HINT_T0), _mm_prefetch(a + sizeof(CWNode) - 1, _MM_HINT_T0);
+        }
+      };
+      cur = enter_branching<8>(
+          mask, tn, ref, prefetch,
+          [&](int count, MBVHStackEntry* out) {
+            const __m256i rv = refs();
+            push_sorted8(rv, tn, entered, count, out);
+            return nearest_ref8(rv, mbvh_simd::sort_keys8(tn, entered));  // beside the network, not after it
+          },
+          stack, sp, probe);
+      return true;
+    } else {
+      const int count = std::popcount(unsigned(mask));
+      const __m256i rv = refs();
+      if constexpr (O == CWOrder::octant) {
+        const uint64_t order = r.order[mask];
+        push_in_order8(rv, tn, _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(int64_t(order))), stack + sp);
+        cur = ref(uint32_t(order >> (8 * (count - 1))) & 7);
+      } else {
+        if constexpr (O == CWOrder::sort_prefetch) {
+          uint32_t second;
+          push_sorted8(rv, tn, entered, count, stack + sp, &second);
+          const uintptr_t block =
+              Indexed ? reinterpret_cast<uintptr_t>(t.iblocks.data()) + uintptr_t(cw_ileaf_block(second)) * sizeof(CWTriBlock)
+                      : reinterpret_cast<uintptr_t>(t.blocks.data()) +
+                            uintptr_t(mbvh_ref::first_block(cw_leaf_to_mbvh(second))) * sizeof(TriBlock<8>);
+          prefetch_node_or_block(cw_node_address(t, second), block, mbvh_ref::is_leaf(second));
+        } else {
+          push_sorted8(rv, tn, entered, count, stack + sp);
+        }
+        cur = nearest_ref8(rv, mbvh_simd::sort_keys8(tn, entered));
+      }
+      if constexpr (P::enabled) {
+        for (int j = 0; j < count - 1; ++j) probe.write(&stack[sp + j], sizeof(MBVHStackEntry));
+      }
+      sp += uint32_t(count - 1);
+      return true;
+    }
+  };
+  for (;;) {
+    if (leave(cur)) {
+      at = {cur, sp};
+      return false;
+    }
+    if (!mbvh_ref::is_leaf(cur)) {
+      __m256 tn;
+      if (cur & kCWFull) {
+        const MBVHNode<8>& nd = full[cur & ~kCWFull];
+        probe.node(&nd, sizeof(nd));
+        const __m256 entered = box_test<8>(nd, cw_full_ray(r), tfar, tn);
+        if (descend(
+                entered, tn, [&] { return _mm256_load_si256(reinterpret_cast<const __m256i*>(nd.ref)); },
+                [&](uint32_t i) { return nd.ref[i]; }))
+          continue;
+      } else {
+        const CWNode& nd = nodes[cur];
+        probe.node(&nd, sizeof(nd));
+        const __m256 entered = cw_box_test<ExpAdd>(nd, r, tfar8, tn);
+        if (descend(
+                entered, tn, [&] { return cw_child_refs(nd); }, [&](uint32_t i) { return cw_child_ref(nd, i); }))
+          continue;
+      }
+    } else {
+      if constexpr (Indexed) {
+        uint32_t k = cw_ileaf_block(cur);
+        probe.leaf(&t.iblocks[k], 0, 1);
+        for (;; ++k) {
+          const CWTriBlock& b = t.iblocks[k];
+          probe.tris(&b, sizeof(CWTriBlock), b.lanes);
+          indexed_block_intersect(tr, b, hit);
+          if (b.last) break;
+        }
+      } else {
+        const uint32_t leaf = cw_leaf_to_mbvh(cur);
+        probe_leaf<8>(t.blocks.data(), leaf, probe, 1);
+        leaf_test<8, TriKernel::watertight>(t.blocks.data(), nullptr, tr, nullptr, leaf, hit);
+      }
+      tfar = hit.t;
+      tfar8 = _mm256_set1_ps(tfar);
+    }
+    if (!pop_pending(stack, sp, tfar, cur, probe)) return true;
+  }
+}
+template <CWOrder O, bool ExpAdd, bool Indexed, class P>
+void cw_traverse(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, Hit& hit, MBVHStackEntry* stack, P& probe) {
+  MBVHCursor at{t.root, 0};
+  cw_traverse_from<O, ExpAdd, Indexed>(t, r, tr, at, hit, stack, probe, NeverLeave{});
+}
+
 }  // namespace tb

@@ -63,6 +63,14 @@ MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHB
   return d;
 }
 
+std::shared_ptr<const CWBVH> fetch_cwbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params,
+                                         int full_percent, CWSlots slots, CWLeaves leaves) {
+  const MBVHData<8, 8> m = fetch_mbvh<8, 8>(scene, cache, params, TriKernel::watertight);
+  return cache.get<CWBVH>(params.key(8, 8) + ":full" + std::to_string(full_percent) +
+                              (slots == CWSlots::octant ? ":octant" : "") + (leaves == CWLeaves::indexed ? ":indexed" : ""),
+                          [&] { return CWBVH::compress(*m.mbvh, full_percent / 100.0, slots, leaves); });
+}
+
 template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
 template MBVHData<8, 4> fetch_mbvh<8, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
 template MBVHData<8, 8> fetch_mbvh<8, 8>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);

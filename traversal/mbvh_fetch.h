@@ -2,10 +2,12 @@
 // from a resolved SchemeConfig, and the cached structure. Kept out of structures/mbvh.h so that
 // structures/ never parses a SchemeConfig (issue 15: layers point down).
 #pragma once
+#include <memory>
 #include <string>
 #include <utility>
 #include <variant>
 
+#include "structures/cwbvh.h"
 #include "structures/mbvh.h"
 #include "traversal/bvh_common.h"
 #include "traversal/traverser.h"
@@ -55,6 +57,14 @@ inline std::string prefetch_info(bool on) {
 // MBVH and, for the scalar kernels, its triangles in lane order.
 template <int N, int W>
 MBVHData<N, W> fetch_mbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params, TriKernel kernel);
+// cwbvh_single's default share of uncompressed nodes (`full_top`, percent; cwbvh_single.cpp says
+// why 4), also the layout treelet_queue's `tree=cwbvh` cuts.
+inline constexpr int kCWFullTop = 4;
+// The compressed 8-wide BVH (structures/cwbvh.h) of the MBVH8 built with `params`, `full_percent`
+// percent of its nodes uncompressed: one cached structure for cwbvh_single and treelet_queue's
+// `tree=cwbvh` where their parameters agree.
+std::shared_ptr<const CWBVH> fetch_cwbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params,
+                                         int full_percent, CWSlots slots, CWLeaves leaves);
 
 // The MBVH of a scheme, in the one of its layouts it runs (mbvh8_single's tri_width, mbvh_rs's
 // width); `visit` hands it to a generic lambda (once per trace call, outside the per-ray loop).

@@ -3,33 +3,43 @@
 // cache; when a ray enters a treelet, add it to the treelet's queue; intersect all enqueued rays
 // with the treelet, amortising its load").
 //
-// The structure is mbvh8_single's cached MBVH8 (same build parameters and defaults), cut into
-// treelets of at most `treelet_bytes` (structures/treelet.h). A pool of `rays_in_flight` rays
+// The structure (`tree`) is cwbvh_single's compressed BVH (structures/cwbvh.h, its defaults: 4% of
+// the nodes uncompressed, indexed leaves) or mbvh8_single's MBVH8, built with mbvh8_single's
+// parameters and defaults, and cut into treelets of at most `treelet_bytes` of that tree's own
+// bytes (structures/treelet.h). A pool of `rays_in_flight` rays
 // each keeps its whole traversal state — the pending stack of (reference, entry distance), the
 // reference it visits next, its closest hit so far — in memory while it waits. The scheduler
-// repeatedly takes the fullest queue and runs each of its rays with mbvh8_single's loop
-// (mbvh_traverse_from: box_test, the bitonic child order, block_intersect) until the next
-// reference it would visit lies in another treelet; the ray then goes to that treelet's queue.
+// repeatedly takes the fullest queue and runs each of its rays with the single-ray loop of that
+// tree's scheme (cw_traverse_from with CWOrder::sort, or mbvh_traverse_from with the bitonic child
+// order) until the next node it would visit lies in another treelet; the ray then goes to that
+// treelet's queue. A leaf is tested where the ray is (see run_ray). The default is the compressed
+// tree, both answers of the lecture together: on bounce:2 of spheres:2M at 1024x1024 it reads
+// 0.49x mbvh8_single's memory lines where the MBVH8's treelets read 0.7x (node bytes 0.34x,
+// triangle bytes 0.63x, so a budget holds more of the tree); `tree=mbvh8` isolates the
+// reordering (the same visits as mbvh8_single). docs/PERFORMANCE.md, session 33.
 // Rays not yet started count towards the root treelet's queue (up to the free slots) and start
 // there, from the batch, when it is visited; a finished ray frees its slot for the next one. The
-// default pool holds a whole 65536-ray chunk: on crytek_sponza_partial 512x512 bounce:2 8192 rays
-// gave 8.4 simulated memory reads per ray, 65536 6.5 (docs/PERFORMANCE.md, Bandwidth).
+// default pool holds a whole 131072-ray chunk: on crytek_sponza_partial 512x512 bounce:2 8192 rays
+// gave 8.4 simulated memory reads per ray, 65536 6.5 (the MBVH8's treelets; docs/PERFORMANCE.md,
+// Bandwidth), and on the compressed tree 131072 reads fewer lines than 65536 on crytek 512x512 and
+// spheres:2M at 512x512 and 1024x1024, 262144 more on crytek (session 33).
 // Because a ray is only suspended between two visits and resumes with the same stack, it visits
-// exactly the nodes and leaves mbvh8_single visits with `order=sort` (its order for all but
-// common-origin batches), in the same order: its hits are bit-identical (tested).
+// exactly the nodes and leaves cwbvh_single (mbvh8_single) visits with `order=sort` (their order
+// for all but common-origin batches), in the same order: its hits are bit-identical (tested).
 //
 // Statistics (`run --stats`, from the instrumented traces): treelet_rays_per_visit (rays run per
 // queue taken), treelet_queues_nonempty (non-empty queues when the scheduler takes one),
 // treelet_queue_rays (rays waiting per non-empty queue then), treelet_switches_per_ray (times a
 // ray moved to another treelet's queue), treelets (how many the tree was cut into); with --cache
 // also where the simulated memory reads go, per ray: treelet_mem_slots and treelet_mem_stacks (the
-// suspended rays' state), treelet_mem_nodes, treelet_mem_tris (the MBVH's node and triangle-block arrays) and
+// suspended rays' state), treelet_mem_nodes, treelet_mem_tris (the tree's node and triangle-block arrays) and
 // treelet_mem_other (the ray batch, the queues, the treelet map), summing to mem_read_m.
 #include <atomic>
 #include <memory>
 #include <queue>
 
 #include "structures/treelet.h"
+#include "traversal/cwbvh_traverse.h"
 #include "traversal/mbvh_fetch.h"
 #include "traversal/mbvh_traverse.h"
 
@@ -42,7 +52,7 @@ namespace {
 // falls in (the SplitProbe::Part ranges); forwards everything to the harness' Probe.
 struct SplitProbe {
   static constexpr bool enabled = true;
-  enum Part { state_slots, state_stacks, node_array, block_array, small_array, parts };
+  enum Part { state_slots, state_stacks, node_array, full_array, block_array, small_array, parts };
   Probe& p;
   TraversalCounts* counts = p.counts;
   const char* lo[parts] = {};
@@ -73,18 +83,28 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
   explicit TreeletQueue(const SchemeConfig& cfg)
       : params_(mbvh_params(cfg, kMBVH8Defaults)),
         budget_(size_t(cfg.get_int("treelet_bytes"))),
-        flight_(uint32_t(cfg.get_int("rays_in_flight"))) {}
+        flight_(uint32_t(cfg.get_int("rays_in_flight"))),
+        compressed_(cfg.get_choice("tree") == "cwbvh") {
+    if (compressed_ && params_.merge > 16) throw InputError("tree=cwbvh: merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
+    if (compressed_ && params_.bvh.max_leaf > 16) throw InputError("tree=cwbvh: leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+  }
   std::string_view name() const override { return "treelet_queue"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
-    data_ = fetch_mbvh<8, 8>(scene, cache, params_, TriKernel::watertight);
-    tl_ = cache.get<Treelets>(params_.key(8, 8) + ":treelets:" + std::to_string(budget_),
-                              [&] { return Treelets::partition(*data_.mbvh, budget_); });
+    const std::string budget = std::to_string(budget_);
+    if (compressed_) {
+      cw_ = fetch_cwbvh(scene, cache, params_, kCWFullTop, CWSlots::mbvh, CWLeaves::indexed);
+      tl_ = cache.get<Treelets>(params_.key(8, 8) + ":cwbvh_treelets:" + budget, [&] { return Treelets::partition(*cw_, budget_); });
+    } else {
+      data_ = fetch_mbvh<8, 8>(scene, cache, params_, TriKernel::watertight);
+      tl_ = cache.get<Treelets>(params_.key(8, 8) + ":treelets:" + budget, [&] { return Treelets::partition(*data_.mbvh, budget_); });
+    }
   }
   std::string structure_info() const override {
-    return data_.mbvh->stats.describe() + " " + tl_->stats.describe();
+    return (compressed_ ? cw_->stats.describe() : data_.mbvh->stats.describe()) + " " + tl_->stats.describe();
   }
-  // The MBVH8's nodes plus the treelet map the scheduler reads; its triangle blocks.
+  // The tree's nodes plus the treelet map the scheduler reads; its triangle blocks.
   StructureBytes memory() const override {
+    if (compressed_) return {cw_->stats.node_bytes + tl_->map_bytes(), cw_->stats.tri_bytes};
     return {data_.mbvh->stats.node_bytes + tl_->map_bytes(), mbvh_prim_bytes(data_, TriKernel::watertight)};
   }
   // Queues fill from the rays of one call (as RayGrid's).
@@ -117,7 +137,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
         schedule(batch, range, hits, split);
         mem_slots_ += split.reads[SplitProbe::state_slots];
         mem_stacks_ += split.reads[SplitProbe::state_stacks];
-        mem_nodes_ += split.reads[SplitProbe::node_array];
+        mem_nodes_ += split.reads[SplitProbe::node_array] + split.reads[SplitProbe::full_array];
         mem_tris_ += split.reads[SplitProbe::block_array] + split.reads[SplitProbe::small_array];
         mem_other_ += split.reads[SplitProbe::parts];
         mem_split_ = true;
@@ -130,13 +150,20 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
  private:
   template <class P>
   void schedule(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
-    const MBVH<8, 8>& m = *data_.mbvh;
     const Treelets& tl = *tl_;
     const uint32_t end = batch.packet_begin[range.last];
     uint32_t next = batch.packet_begin[range.first];
     if (next >= end) return;
+    if (compressed_ && cw_->stats.blocks == 0) {  // an empty scene (cwbvh_single's guard): every ray misses
+      for (; next < end; ++next) hits[next] = finish_hit(initial_hit(batch.rays[next]));
+      return;
+    }
     const uint32_t flight = std::min(flight_, end - next);
-    const size_t cap = size_t(7) * m.stats.max_depth + 10;  // mbvh_traverse's bound for N = 8
+    // mbvh_traverse's stack bound for N = 8 (cw_traverse_from's alike)
+    const size_t cap = size_t(7) * (compressed_ ? cw_->stats.max_depth : data_.mbvh->stats.max_depth) + 10;
+    const uint32_t root_ref = compressed_ ? cw_->root : 0;
+    // The treelet a reference belongs to, as the entry the leave test reads.
+    const auto entry = [&](uint32_t ref) -> const uint32_t& { return compressed_ ? tl.cw_entry(ref) : tl.entry(ref); };
     // The waiting rays' state, one cache line per ray: a copy of the ray (a resumed ray reads no
     // second line from the batch), where it resumes, its index and closest hit. Stacks apart,
     // uninitialised (only the used part is ever touched).
@@ -153,16 +180,23 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
     if constexpr (std::is_same_v<P, SplitProbe>) {
       probe.range(SplitProbe::state_slots, slots.data(), slots.size());
       probe.range(SplitProbe::state_stacks, stacks.get(), flight * cap);
-      probe.range(SplitProbe::node_array, m.nodes.data(), m.nodes.size());
-      probe.range(SplitProbe::block_array, m.blocks.data(), m.blocks.size());
-      probe.range(SplitProbe::small_array, m.small.data(), m.small.size());
+      if (compressed_) {
+        probe.range(SplitProbe::node_array, cw_->nodes.data(), cw_->nodes.size());
+        probe.range(SplitProbe::full_array, cw_->full.data(), cw_->full.size());
+        probe.range(SplitProbe::block_array, cw_->iblocks.data(), cw_->iblocks.size());
+      } else {
+        const MBVH<8, 8>& m = *data_.mbvh;
+        probe.range(SplitProbe::node_array, m.nodes.data(), m.nodes.size());
+        probe.range(SplitProbe::block_array, m.blocks.data(), m.blocks.size());
+        probe.range(SplitProbe::small_array, m.small.data(), m.small.size());
+      }
     }
     // Rays not yet started wait in no queue: the root's treelet counts them (as many as there are
     // free slots) and starts them from the batch when it is visited, so a new ray's first visit
     // reads the batch and a slot line it has just written, not a slot written a whole round before
     // (at 262144 rays in flight on crytek_sponza_partial 512x512 bounce:2 that slot read was
     // about one memory read per ray).
-    const uint32_t root_t = tl.of(0);
+    const uint32_t root_t = entry(root_ref);
     std::vector<uint32_t> free_slots(flight);
     for (uint32_t k = 0; k < flight; ++k) free_slots[k] = flight - 1 - k;  // slot 0 first
     auto size_of = [&](uint32_t t) {
@@ -184,20 +218,38 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
       ++waiting;
       heap.push({size_of(t), t});
     };
-    // Runs the ray of `slot` in treelet t until it finishes (its slot is freed) or leaves.
+    // Runs the ray of `slot` in treelet t until it finishes (its slot is freed) or leaves: the
+    // single-ray loop of mbvh8_single (ChildOrder::sort_always) or of cwbvh_single (CWOrder::sort,
+    // indexed leaves), suspended where the next reference lies in another treelet.
     const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);  // a resumed ray rebuilds its RayCtx
     auto run_ray = [&](uint32_t slot, uint32_t t) {
       Slot& s = slots[slot];
       probe.read(&s, sizeof(Slot));
       const Ray& ray = s.r;
       const RayCtx rc(ray, axes);
-      const bool done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
-          m, nullptr, NodeRay<8>(rc, ray.tmin, m.coord_bound), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, &stacks[slot * cap], probe,
-          [&](uint32_t ref) {
-            const uint32_t& e = tl.entry(ref);
-            probe.read(&e, sizeof(uint32_t));
-            return e != t;
-          });
+      MBVHStackEntry* stack = &stacks[slot * cap];
+      // A leaf is tested where the ray is: one reached from its parent is in this treelet (its
+      // parent is), and one popped from the stack reads its blocks here instead of a switch (the
+      // slot and stack lines again) - and no leaf reads the block map (4 bytes per block: 2 MB on
+      // spheres:2M, a memory read at most leaf visits; docs/PERFORMANCE.md, session 33).
+      const auto leave = [&](uint32_t ref) {
+        if (mbvh_ref::is_leaf(ref)) return false;
+        const uint32_t& e = entry(ref);
+        probe.read(&e, sizeof(uint32_t));
+        return e != t;
+      };
+      bool done;
+      if (compressed_) {
+        const CWBVH& c = *cw_;
+        const CWRay cr(rc, ray.tmin, c.coord_bound, c.e_min, c.e_max);
+        const TriRay<8> tr(rc, ray.tmin);
+        done = cr.exp_add ? cw_traverse_from<CWOrder::sort, true, true>(c, cr, tr, s.at, s.hit, stack, probe, leave)
+                          : cw_traverse_from<CWOrder::sort, false, true>(c, cr, tr, s.at, s.hit, stack, probe, leave);
+      } else {
+        const MBVH<8, 8>& m = *data_.mbvh;
+        done = mbvh_traverse_from<8, 8, TriKernel::watertight, ChildOrder::sort_always>(
+            m, nullptr, NodeRay<8>(rc, ray.tmin, m.coord_bound), TriRay<8>(rc, ray.tmin), &rc, s.at, s.hit, stack, probe, leave);
+      }
       probe.write(&s, sizeof(Slot));
       if (done) {
         hits[s.ray] = finish_hit(s.hit);
@@ -206,7 +258,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
         if (t != root_t && next < end) heap.push({size_of(root_t), root_t});
       } else {
         if constexpr (P::enabled) ++st_switches;
-        enqueue(slot, tl.of(s.at.cur));
+        enqueue(slot, entry(s.at.cur));
       }
     };
     heap.push({size_of(root_t), root_t});
@@ -235,7 +287,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
           if (probe.counts) probe.counts->rays++;
           ++st_rays, ++st_run;
         }
-        slots[slot] = {ray, {0, 0}, i, initial_hit(ray)};
+        slots[slot] = {ray, {root_ref, 0}, i, initial_hit(ray)};
         probe.write(&slots[slot], sizeof(Slot));
         run_ray(slot, t);
       }
@@ -249,7 +301,9 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
   MBVHBuildParams params_;
   size_t budget_;
   uint32_t flight_;
-  MBVHData<8, 8> data_;
+  bool compressed_;                    // tree=cwbvh
+  MBVHData<8, 8> data_;                // tree=mbvh8
+  std::shared_ptr<const CWBVH> cw_;    // tree=cwbvh
   std::shared_ptr<const Treelets> tl_;
   mutable std::atomic<uint64_t> visits_{0}, run_rays_{0}, nonempty_{0}, waiting_{0}, switches_{0}, rays_{0};
   mutable std::atomic<uint64_t> mem_slots_{0}, mem_stacks_{0}, mem_nodes_{0}, mem_tris_{0}, mem_other_{0};
@@ -263,8 +317,11 @@ ParamSpecs params_treelet_queue() {
   return mbvh_param_specs(kMBVH8Defaults) +
          ParamSpecs{int_param("treelet_bytes", 262144, 256, 1 << 30,
                               "treelet byte budget (nodes + their leaves' blocks): 262144 = a 256 KiB L2; 32768 for L1"),
-                    int_param("rays_in_flight", 65536, 1, 1 << 20,
-                              "rays whose traversal state waits in the queues at once (the ray pool)")};
+                    int_param("rays_in_flight", 131072, 1, 1 << 20,
+                              "rays whose traversal state waits in the queues at once (the ray pool)"),
+                    choice_param("tree", "cwbvh", {"cwbvh", "mbvh8"},
+                                 "the tree cut into treelets: mbvh8 = mbvh8_single's MBVH8 and loop; cwbvh = "
+                                 "cwbvh_single's compressed BVH (its defaults: full_top=4, indexed leaves) and loop")};
 }
 
 }  // namespace tb
