@@ -21,10 +21,10 @@ namespace {
 std::vector<std::string> table_schemes(const TableOptions& opt, const std::vector<std::string>& fallback) {
   if (!opt.run.schemes.empty()) return opt.run.schemes;
   if (!fallback.empty()) {
-    std::vector<std::string> known;  // keep only registered schemes, in the given order
+    std::vector<std::string> known;  // keep only registered schemes (an entry may carry parameters), in the given order
     for (const auto& f : fallback)
       for (const auto& s : schemes())
-        if (s.name == f) known.push_back(f);
+        if (s.name == scheme_name_of(f)) known.push_back(f);
     return known;
   }
   std::vector<std::string> all;

@@ -81,5 +81,27 @@ TEST(TableBandwidth, RoundsInterleaveAndRatiosPairTheSameRound) {
   std::filesystem::remove_all(dir);
 }
 
+// Without --schemes the table runs its default set, entries with parameters of their own
+// included (the reordering alone, `treelet_queue:tree=mbvh8`, beside the default treelet_queue).
+TEST(TableBandwidth, DefaultSchemesKeepEntriesWithParameters) {
+  const auto dir = test::temp_dir("table_bandwidth_default");
+  TableOptions opt;
+  opt.scene = "room";
+  opt.csv = (dir / "b.csv").string();
+  opt.run.width = opt.run.height = 16;
+  opt.run.reps = 1;
+  opt.run.progress = false;
+  ASSERT_EQ(run_table("bandwidth", opt), 0);
+  const CsvTable t = read_csv(opt.csv);
+  const int scheme = t.column("scheme");
+  ASSERT_GE(scheme, 0);
+  std::vector<std::string> seen;
+  for (size_t i = 0; i < t.rows.size(); ++i)
+    if (std::find(seen.begin(), seen.end(), t.at(i, scheme)) == seen.end()) seen.push_back(t.at(i, scheme));
+  EXPECT_EQ(seen, (std::vector<std::string>{"mbvh8_single", "cwbvh_single", "treelet_queue", "treelet_queue:tree=mbvh8",
+                                            "mbvh_rs", "raygrid"}));
+  std::filesystem::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace tb
