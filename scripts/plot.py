@@ -26,8 +26,12 @@ _palette = plt.get_cmap("tab20").colors
 
 def colour(scheme):
     base = scheme.split("@")[0]
-    i = SCHEME_ORDER.index(base) if base in SCHEME_ORDER else len(SCHEME_ORDER) + zlib.crc32(base.encode()) % 6  # stable across runs (str hash is salted)
-    return _palette[i % len(_palette)]
+    # An entry with parameters of its own (`treelet_queue:tree=mbvh8`) takes its scheme's colour,
+    # darkened: beside the default entry, never another scheme's colour.
+    name, _, params = base.partition(":")
+    i = SCHEME_ORDER.index(name) if name in SCHEME_ORDER else len(SCHEME_ORDER) + zlib.crc32(name.encode()) % 6  # stable across runs (str hash is salted)
+    c = _palette[i % len(_palette)]
+    return tuple(0.55 * x for x in c) if params else c
 
 
 def read(path):

@@ -19,10 +19,13 @@
 // reordering (the same visits as mbvh8_single). docs/PERFORMANCE.md, session 33.
 // Rays not yet started count towards the root treelet's queue (up to the free slots) and start
 // there, from the batch, when it is visited; a finished ray frees its slot for the next one. The
-// default pool holds a whole 131072-ray chunk: on crytek_sponza_partial 512x512 bounce:2 8192 rays
-// gave 8.4 simulated memory reads per ray, 65536 6.5 (the MBVH8's treelets; docs/PERFORMANCE.md,
-// Bandwidth), and on the compressed tree 131072 reads fewer lines than 65536 on crytek 512x512 and
-// spheres:2M at 512x512 and 1024x1024, 262144 more on crytek (session 33).
+// default pool holds a whole 262144-ray chunk and the default treelet 128 KiB (half the simulated
+// 256 KiB L2, which the treelet shares with the lines of the rays it runs): on the compressed tree
+// (bounce:2, reads per ray against mbvh8_single's) they give spheres:500k at 2048x2048 0.44x and
+// spheres:2M at 1024x1024 0.39x, where 256 KiB and 131072 rays gave 0.51x and 0.44x, at the cost
+// of crytek_sponza_partial 512x512 (0.81x against 0.73x; its rays stay in the room they bounce in,
+// and no setting reaches 0.5x there). On the MBVH8's treelets 8192 rays had read 8.4 lines per
+// ray on crytek, 65536 6.5 (docs/PERFORMANCE.md, Bandwidth; session 33 for the rest).
 // Because a ray is only suspended between two visits and resumes with the same stack, it visits
 // exactly the nodes and leaves cwbvh_single (mbvh8_single) visits with `order=sort` (their order
 // for all but common-origin batches), in the same order: its hits are bit-identical (tested).
@@ -315,9 +318,9 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
 std::unique_ptr<Traverser> make_treelet_queue(const SchemeConfig& cfg) { return std::make_unique<TreeletQueue>(cfg); }
 ParamSpecs params_treelet_queue() {
   return mbvh_param_specs(kMBVH8Defaults) +
-         ParamSpecs{int_param("treelet_bytes", 262144, 256, 1 << 30,
-                              "treelet byte budget (nodes + their leaves' blocks): 262144 = a 256 KiB L2; 32768 for L1"),
-                    int_param("rays_in_flight", 131072, 1, 1 << 20,
+         ParamSpecs{int_param("treelet_bytes", 131072, 256, 1 << 30,
+                              "treelet byte budget (nodes + their leaves' blocks): 131072 = half a 256 KiB L2; 32768 for L1"),
+                    int_param("rays_in_flight", 262144, 1, 1 << 20,
                               "rays whose traversal state waits in the queues at once (the ray pool)"),
                     choice_param("tree", "cwbvh", {"cwbvh", "mbvh8"},
                                  "the tree cut into treelets: mbvh8 = mbvh8_single's MBVH8 and loop; cwbvh = "
