@@ -14,7 +14,7 @@
 // order) until the next node it would visit lies in another treelet; the ray then goes to that
 // treelet's queue. A leaf is tested where the ray is (see run_ray). The default is the compressed
 // tree, both answers of the lecture together: on bounce:2 of spheres:2M at 1024x1024 it reads
-// 0.49x mbvh8_single's memory lines where the MBVH8's treelets read 0.7x (node bytes 0.34x,
+// 0.39x mbvh8_single's memory lines where the MBVH8's treelets read 0.50x (node bytes 0.34x,
 // triangle bytes 0.63x, so a budget holds more of the tree); `tree=mbvh8` isolates the
 // reordering (the same visits as mbvh8_single). docs/PERFORMANCE.md, session 33.
 // Rays not yet started count towards the root treelet's queue (up to the free slots) and start
