@@ -129,9 +129,7 @@ def main():
         with open(args.out, newline="") as f:
             rows = [r for r in csv.DictReader(f) if r["width"] == str(args.width) and r["height"] == str(args.height)]
     for r in rows:
-        r.setdefault("tree", "mbvh8")
-        if not r["tree"]:
-            r["tree"] = "mbvh8"
+        r["tree"] = r.get("tree") or "mbvh8"
     done = {(r["tree"], r["rays_in_flight"], r["treelet_bytes"]) for r in rows}
     base = {r["workload"]: r["mbvh8_single_mem_reads_per_ray"] for r in rows}
     cold = {r["workload"]: r.get("mbvh8_single_cold_reads_per_ray", "") for r in rows}

@@ -21,7 +21,6 @@ float half_area(const AABB& b) {
   return d.x * d.y + d.y * d.z + d.z * d.x;
 }
 
-
 // The tree as the partition reads it: interior nodes by a dense index (0..nodes()-1), the root's
 // root(); children(n, f) calls f(dense index, box half-area) for each interior child of n; cost(n)
 // is n's bytes plus its leaf children's blocks; assign(t, n, id) puts n and those blocks in

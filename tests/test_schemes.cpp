@@ -155,7 +155,9 @@ TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
       {"kd_single", "kd_ct", "nan"},     {"kd_packet", "kd_packet", "12"},     {"embree_single", "robust", "yes"},
       {"mbvh4_single", "small", "2"},    {"bvh_ranged", "tricull", "-1"},
       // 4-wide leaf blocks: `small` (which leaves of 8-wide blocks take a 4-wide one) only takes 0.
-      {"mbvh4_single", "small", "4"},    {"mbvh_rs", "small", "4"}};
+      {"mbvh4_single", "small", "4"},    {"mbvh_rs", "small", "4"},
+      // Leaves a compressed BVH cannot hold (more than 16 triangles), also treelet_queue's default tree.
+      {"cwbvh_single", "merge", "17"},   {"cwbvh_single", "leaf_size", "17"}, {"treelet_queue", "merge", "17"}};
   for (const auto& [scheme, key, value] : bad) {
     SchemeConfig c;
     c.params[key] = value;
@@ -169,6 +171,11 @@ TEST(Registry, ValuesAreCheckedAgainstTheirDeclaredTypeAndRange) {
     SchemeConfig c;
     c.params[key] = value;
     EXPECT_NO_THROW(make_scheme(scheme, c)) << scheme << " " << key << "=" << value;
+  }
+  {  // treelet_queue's MBVH8 tree takes the leaves its compressed tree refuses
+    SchemeConfig c;
+    c.params = {{"tree", "mbvh8"}, {"merge", "17"}};
+    EXPECT_NO_THROW(make_scheme("treelet_queue", c));
   }
   // The refusal names the range in full (not 1.04858e+06 for 2^20).
   SchemeConfig c;

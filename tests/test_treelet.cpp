@@ -104,14 +104,17 @@ SchemeConfig sort_order() {
   return c;
 }
 
-// Bit-identical hits to the single-ray scheme whose loop treelet_queue suspends (`single`, on the
-// tree `tree`) on ordinary and hard workloads, with the default (L2) budget and a tiny one that
+// The single-ray scheme whose loop treelet_queue runs on `tree` (its `tree` parameter).
+std::string single_of(const std::string& tree) { return tree == "cwbvh" ? "cwbvh_single" : "mbvh8_single"; }
+
+// Bit-identical hits to the single-ray scheme whose loop treelet_queue suspends on the tree `tree`
+// (single_of) on ordinary and hard workloads, with the default (L2) budget and a tiny one that
 // makes rays cross treelet boundaries many times, and a ray pool smaller than the batch (slots are
 // reused).
-void expect_hits_of(const std::string& tree, const std::string& single) {
+void expect_hits_of(const std::string& tree) {
   for (const std::string scene : {"room", "sphere@148376,1234,-223423"}) {
     Bench& bench = test::bench_for(scene);
-    auto ref = make_scheme(single, sort_order());
+    auto ref = make_scheme(single_of(tree), sort_order());
     ref->prepare(bench.scene(), bench.cache());
     std::vector<std::string> workloads = {"primary", "bounce:2", "shadow"};
     for (const auto& h : hard_case_names()) workloads.push_back(h);
@@ -132,10 +135,10 @@ void expect_hits_of(const std::string& tree, const std::string& single) {
     }
   }
 }
-TEST(TreeletQueue, HitsAreBitIdenticalToMBVH8Single) { expect_hits_of("mbvh8", "mbvh8_single"); }
+TEST(TreeletQueue, HitsAreBitIdenticalToMBVH8Single) { expect_hits_of("mbvh8"); }
 // `tree=cwbvh`: the same against cwbvh_single (order=sort), whose loop it suspends on the compressed
 // BVH.
-TEST(TreeletQueue, CompressedTreeHitsAreBitIdenticalToCWBVHSingle) { expect_hits_of("cwbvh", "cwbvh_single"); }
+TEST(TreeletQueue, CompressedTreeHitsAreBitIdenticalToCWBVHSingle) { expect_hits_of("cwbvh"); }
 
 // --stats: rays move between queues (a small budget cuts the tree into many treelets), several
 // rays share a treelet visit, and the instrumented path gives the same hits as the timed one.
@@ -162,39 +165,39 @@ TEST(TreeletQueue, StatsShowQueuedRaysAndSwitches) {
 // start rays into freed slots.
 TEST(TreeletQueue, MemoryReadSplitAddsUpToSimulatedReads) {
   for (const std::string tree : {"mbvh8", "cwbvh"}) {
-  SCOPED_TRACE("tree=" + tree);
-  Bench& bench = test::bench_for("stadium");
-  const RayBatch& b = bench.rays(test::small_spec("bounce:2", 64));
-  auto ref = make_scheme(tree == "cwbvh" ? "cwbvh_single" : "mbvh8_single", sort_order());
-  ref->prepare(bench.scene(), bench.cache());
-  std::vector<Hit> a(b.size()), q(b.size());
-  trace_batch(*ref, b, a, 1);
-  SchemeConfig cfg;
-  cfg.params = {{"treelet_bytes", "4096"}, {"rays_in_flight", "300"}, {"tree", tree}};
-  auto t = make_scheme("treelet_queue", cfg);
-  t->prepare(bench.scene(), bench.cache());
-  t->take_stat_columns();
-  // A small hierarchy, so the stadium's tree does not fit and every part misses somewhere.
-  cachesim::Hierarchy h(cachesim::parse_config("l1=1K:2,l2=4K:4"));
-  Probe probe;
-  probe.cache = &h;
-  t->trace(b, PacketRange::all(b), q, probe);
-  size_t differ = 0;
-  for (size_t i = 0; i < b.size(); ++i) differ += std::memcmp(&a[i], &q[i], sizeof(Hit)) != 0;
-  EXPECT_EQ(differ, 0u);
-  double sum = 0;
-  int parts = 0;
-  for (const StatColumn& c : t->take_stat_columns()) {
-    if (c.name.rfind("treelet_mem_", 0) != 0) continue;
-    ++parts;
-    EXPECT_GT(c.value, 0.0) << c.name;
-    sum += c.value;
-  }
-  EXPECT_EQ(parts, 5);
-  EXPECT_NEAR(sum * double(b.size()), double(h.memory_reads()), 0.5);
-  // Without a cache the split is not reported (no zeros posing as measurements).
-  t->trace(b, PacketRange::all(b), q, probe = Probe{});
-  for (const StatColumn& c : t->take_stat_columns()) EXPECT_NE(c.name.rfind("treelet_mem_", 0), 0u) << c.name;
+    SCOPED_TRACE("tree=" + tree);
+    Bench& bench = test::bench_for("stadium");
+    const RayBatch& b = bench.rays(test::small_spec("bounce:2", 64));
+    auto ref = make_scheme(single_of(tree), sort_order());
+    ref->prepare(bench.scene(), bench.cache());
+    std::vector<Hit> a(b.size()), q(b.size());
+    trace_batch(*ref, b, a, 1);
+    SchemeConfig cfg;
+    cfg.params = {{"treelet_bytes", "4096"}, {"rays_in_flight", "300"}, {"tree", tree}};
+    auto t = make_scheme("treelet_queue", cfg);
+    t->prepare(bench.scene(), bench.cache());
+    t->take_stat_columns();
+    // A small hierarchy, so the stadium's tree does not fit and every part misses somewhere.
+    cachesim::Hierarchy h(cachesim::parse_config("l1=1K:2,l2=4K:4"));
+    Probe probe;
+    probe.cache = &h;
+    t->trace(b, PacketRange::all(b), q, probe);
+    size_t differ = 0;
+    for (size_t i = 0; i < b.size(); ++i) differ += std::memcmp(&a[i], &q[i], sizeof(Hit)) != 0;
+    EXPECT_EQ(differ, 0u);
+    double sum = 0;
+    int parts = 0;
+    for (const StatColumn& c : t->take_stat_columns()) {
+      if (c.name.rfind("treelet_mem_", 0) != 0) continue;
+      ++parts;
+      EXPECT_GT(c.value, 0.0) << c.name;
+      sum += c.value;
+    }
+    EXPECT_EQ(parts, 5);
+    EXPECT_NEAR(sum * double(b.size()), double(h.memory_reads()), 0.5);
+    // Without a cache the split is not reported (no zeros posing as measurements).
+    t->trace(b, PacketRange::all(b), q, probe = Probe{});
+    for (const StatColumn& c : t->take_stat_columns()) EXPECT_NE(c.name.rfind("treelet_mem_", 0), 0u) << c.name;
   }
 }
 
@@ -206,32 +209,32 @@ TEST(TreeletQueue, MemoryReadSplitAddsUpToSimulatedReads) {
 TEST(TreeletQueue, ColdReadsAreAtLeastMBVH8Singles) {
   Bench& bench = test::bench_for("stadium");
   for (const std::string tree : {"mbvh8", "cwbvh"}) {
-  auto ref = make_scheme(tree == "cwbvh" ? "cwbvh_single" : "mbvh8_single", sort_order());
-  ref->prepare(bench.scene(), bench.cache());
-  for (const char* w : {"bounce:2", "rnd"}) {
-    const RayBatch& b = bench.rays(test::small_spec(w, 64));
-    std::vector<Hit> hits(b.size());
-    auto cold_and_reads = [&](const Traverser& t) {
-      cachesim::Hierarchy h(cachesim::parse_config("l1=1K:2,l2=4K:4"));
-      Probe probe;
-      probe.cache = &h;
-      t.trace(b, PacketRange::all(b), hits, probe);
-      EXPECT_GE(h.memory_reads(), h.cold_reads());
-      return std::pair{h.cold_reads(), h.memory_reads()};
-    };
-    const uint64_t base_cold = cold_and_reads(*ref).first;
-    EXPECT_GT(base_cold, 0u);
-    for (const char* budget : {"4096", "262144"})
-      for (const char* flight : {"300", "65536"}) {
-        SchemeConfig cfg;
-        cfg.params = {{"treelet_bytes", budget}, {"rays_in_flight", flight}, {"tree", tree}};
-        auto t = make_scheme("treelet_queue", cfg);
-        t->prepare(bench.scene(), bench.cache());
-        const auto [cold, reads] = cold_and_reads(*t);
-        EXPECT_GE(cold, base_cold) << w << " treelet_bytes=" << budget << " rays_in_flight=" << flight << " tree=" << tree;
-        EXPECT_GE(reads, base_cold) << w << " treelet_bytes=" << budget << " rays_in_flight=" << flight << " tree=" << tree;
-      }
-  }
+    auto ref = make_scheme(single_of(tree), sort_order());
+    ref->prepare(bench.scene(), bench.cache());
+    for (const char* w : {"bounce:2", "rnd"}) {
+      const RayBatch& b = bench.rays(test::small_spec(w, 64));
+      std::vector<Hit> hits(b.size());
+      auto cold_and_reads = [&](const Traverser& t) {
+        cachesim::Hierarchy h(cachesim::parse_config("l1=1K:2,l2=4K:4"));
+        Probe probe;
+        probe.cache = &h;
+        t.trace(b, PacketRange::all(b), hits, probe);
+        EXPECT_GE(h.memory_reads(), h.cold_reads());
+        return std::pair{h.cold_reads(), h.memory_reads()};
+      };
+      const uint64_t base_cold = cold_and_reads(*ref).first;
+      EXPECT_GT(base_cold, 0u);
+      for (const char* budget : {"4096", "262144"})
+        for (const char* flight : {"300", "65536"}) {
+          SchemeConfig cfg;
+          cfg.params = {{"treelet_bytes", budget}, {"rays_in_flight", flight}, {"tree", tree}};
+          auto t = make_scheme("treelet_queue", cfg);
+          t->prepare(bench.scene(), bench.cache());
+          const auto [cold, reads] = cold_and_reads(*t);
+          EXPECT_GE(cold, base_cold) << w << " treelet_bytes=" << budget << " rays_in_flight=" << flight << " tree=" << tree;
+          EXPECT_GE(reads, base_cold) << w << " treelet_bytes=" << budget << " rays_in_flight=" << flight << " tree=" << tree;
+        }
+    }
   }
 }
 

@@ -64,8 +64,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
         order_(parse_order_param(cfg.get_choice("order"))),
         full_percent_(cfg.get_int("full_top")),
         leaves_(cfg.get_choice("leaves") == "indexed" ? CWLeaves::indexed : CWLeaves::blocks) {
-    if (params_.merge > 16) throw InputError("merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
-    if (params_.bvh.max_leaf > 16) throw InputError("leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+    check_cwbvh_params(params_);
   }
   std::string_view name() const override { return "cwbvh_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {

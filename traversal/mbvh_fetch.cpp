@@ -71,6 +71,11 @@ std::shared_ptr<const CWBVH> fetch_cwbvh(const Scene& scene, StructureCache& cac
                           [&] { return CWBVH::compress(*m.mbvh, full_percent / 100.0, slots, leaves); });
 }
 
+void check_cwbvh_params(const MBVHBuildParams& params, const std::string& prefix) {
+  if (params.merge > 16) throw InputError(prefix + "merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
+  if (params.bvh.max_leaf > 16) throw InputError(prefix + "leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+}
+
 template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
 template MBVHData<8, 4> fetch_mbvh<8, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
 template MBVHData<8, 8> fetch_mbvh<8, 8>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);

@@ -65,6 +65,10 @@ inline constexpr int kCWFullTop = 4;
 // `tree=cwbvh` where their parameters agree.
 std::shared_ptr<const CWBVH> fetch_cwbvh(const Scene& scene, StructureCache& cache, const MBVHBuildParams& params,
                                          int full_percent, CWSlots slots, CWLeaves leaves);
+// Refuses (InputError, the message after `prefix`) MBVH parameters whose leaves a compressed BVH
+// cannot hold: `merge` or `leaf_size` above 16 triangles. Called when a scheme that compresses is
+// made, so a run refuses before it builds anything.
+void check_cwbvh_params(const MBVHBuildParams& params, const std::string& prefix = "");
 
 // The MBVH of a scheme, in the one of its layouts it runs (mbvh8_single's tri_width, mbvh_rs's
 // width); `visit` hands it to a generic lambda (once per trace call, outside the per-ray loop).

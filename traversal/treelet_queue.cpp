@@ -88,8 +88,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
         budget_(size_t(cfg.get_int("treelet_bytes"))),
         flight_(uint32_t(cfg.get_int("rays_in_flight"))),
         compressed_(cfg.get_choice("tree") == "cwbvh") {
-    if (compressed_ && params_.merge > 16) throw InputError("tree=cwbvh: merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
-    if (compressed_ && params_.bvh.max_leaf > 16) throw InputError("tree=cwbvh: leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+    if (compressed_) check_cwbvh_params(params_, "tree=cwbvh: ");
   }
   std::string_view name() const override { return "treelet_queue"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
