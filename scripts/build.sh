@@ -27,4 +27,15 @@ if [ "${TRAVBENCH_PGO:-1}" = 1 ]; then
   pgo=(-DTRAVBENCH_PGO_USE="$PWD/$gen/pgo-profile")
 fi
 cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=Release "${launcher[@]}" "${pgo[@]}" "$@" >/dev/null
+# A profile is not a dependency make sees: objects compiled with another training's counts would
+# be kept (session 34: a changed training script changed nothing until the sources did). So when
+# the training script differs from the one the build last used, or the PGO setting does,
+# everything is recompiled. (The counts themselves differ a little from run to run, threads and
+# timing loops, so they cannot be the key.)
+stamp="$dir/pgo-training.sha1"
+want="pgo=${TRAVBENCH_PGO:-1} $(sha1sum scripts/pgo_train.sh | cut -d' ' -f1)"
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+  cmake --build "$dir" --target clean
+fi
 cmake --build "$dir" -j "$(nproc)"
+echo "$want" >"$stamp"

@@ -115,6 +115,11 @@ EXPLAIN = {
         "thesis' quad core) because the VM's 1-minute load average was the printed load while they ran (other "
         "sessions' builds, results/README.md): a build that gets ~1 core is not sped up, so the ratios compare "
         "noise. `build_cpu_ms`, `loadavg` in build.csv; re-run on a quiet machine with 4 cores."),
+    "t1.threads_rebuild_more@capped": (
+        "measured: at the sizes where refit is not behind, both speedups are at least 1.6x of the 2x that this "
+        "VM's 2 hardware threads allow (the four objects are refitted in parallel as they are rebuilt), so "
+        "which is larger is noise; the thesis' quad core let its rebuilds reach 3.8-4.2x where its refits "
+        "stopped at 1.4-1.8x. Re-run on a machine with 4 cores to test the claim."),
     "t2-4.monotone@uncalibrated": (
         "documented: this CSV predates the calibration (256², the views' 55–70° fov: its D = 1 is already "
         "0.23–0.31° between adjacent rays, the thesis' D ≈ 7–9; docs/WORKLOADS.md), so its D ≤ 8 rows are the "
@@ -359,19 +364,21 @@ def table1(R):
         by = {}
         for r in rs:
             by.setdefault(r["triangles"], {})[r["threads"]] = r
-        parts, ok, pars, loads = [], True, [], []
+        parts, ok, pars, loads, capped = [], True, [], [], True
         for tri, x in sorted(by.items(), key=lambda kv: int(kv[0])):
             if "1" not in x or "4" not in x:
                 continue
             sb = num(x["1"]["build_ms"]) / num(x["4"]["build_ms"])
             sr = num(x["1"]["refit_ms"]) / num(x["4"]["refit_ms"])
             ok = ok and sb > sr
+            # Where refit is not behind, were both near the 2x two hardware threads allow?
+            capped = capped and (sb > sr or min(sb, sr) >= 1.6)
             pars.append(num(x["4"]["build_cpu_ms"]) / max(num(x["4"]["build_ms"]), 1e-9))
             loads.append(num(x["4"].get("loadavg")) or 0)
             parts.append(f"{tri}: rebuild {sb:.2f}x, refit {sr:.2f}x")
         tt = "; ".join(f"{k}: rebuild {float(t['rebuild_1t_ms']) / float(t['rebuild_4t_ms']):.1f}x, "
                        f"refit {float(t['refit_1t_ms']) / float(t['refit_4t_ms']):.1f}x" for k, t in t1.items())
-        variant = "starved" if pars and max(pars) < 1.5 else None
+        variant = "starved" if pars and max(pars) < 1.5 else ("capped" if capped else None)
         R.check("t1.threads_rebuild_more", f"{builder}: threads speed up rebuild more than refit (4 threads)", ok,
                 "; ".join(parts) + f" (thesis: {tt}); 4-thread rebuilds got cpu/wall "
                 + ", ".join(f"{p:.2f}" for p in pars) + " at load " + ", ".join(f"{l:.1f}" for l in loads)
