@@ -60,6 +60,28 @@ void check_invariants(const Scene& s, const BVH& bvh, int max_leaf) {
   check_tree(bvh, max_leaf, all, [&](uint32_t t) { return s.triangle_bounds(t); });
 }
 
+
+// vmin / vmax (structures/vec3.h) are minss / maxss intrinsics so that no compiler profile turns
+// them into branches (docs/PERFORMANCE.md, session 34); they must still be std::min / std::max bit
+// for bit, NaNs and signed zeros included, since every box of every builder goes through them.
+TEST(Vec3, MinMaxAreStdMinMaxBitForBit) {
+  const float v[] = {0.f, -0.f, 1.f, -1.f, 1e-40f, -1e-40f, 3e38f, -3e38f, INFINITY, -INFINITY, NAN, -NAN, 0.5f};
+  const auto bits = [](float x) {
+    uint32_t u;
+    std::memcpy(&u, &x, sizeof u);
+    return u;
+  };
+  for (float a : v)
+    for (float b : v) {
+      const Vec3 lo = vmin({a, b, a}, {b, a, a}), hi = vmax({a, b, a}, {b, a, a});
+      EXPECT_EQ(bits(lo.x), bits(std::min(a, b))) << a << " " << b;
+      EXPECT_EQ(bits(lo.y), bits(std::min(b, a))) << a << " " << b;
+      EXPECT_EQ(bits(lo.z), bits(std::min(a, a))) << a;
+      EXPECT_EQ(bits(hi.x), bits(std::max(a, b))) << a << " " << b;
+      EXPECT_EQ(bits(hi.y), bits(std::max(b, a))) << a << " " << b;
+      EXPECT_EQ(bits(hi.z), bits(std::max(a, a))) << a;
+    }
+}
 TEST(BVH, InvariantsOnRandomTriangles) {
   for (int leaf : {1, 4, 8}) {
     Scene s = random_triangles(3000, 7);
