@@ -60,7 +60,6 @@ void check_invariants(const Scene& s, const BVH& bvh, int max_leaf) {
   check_tree(bvh, max_leaf, all, [&](uint32_t t) { return s.triangle_bounds(t); });
 }
 
-
 // vmin / vmax (structures/vec3.h) are minss / maxss intrinsics so that no compiler profile turns
 // them into branches (docs/PERFORMANCE.md, session 34); they must still be std::min / std::max bit
 // for bit, NaNs and signed zeros included, since every box of every builder goes through them.
@@ -82,6 +81,7 @@ TEST(Vec3, MinMaxAreStdMinMaxBitForBit) {
       EXPECT_EQ(bits(hi.z), bits(std::max(a, a))) << a;
     }
 }
+
 TEST(BVH, InvariantsOnRandomTriangles) {
   for (int leaf : {1, 4, 8}) {
     Scene s = random_triangles(3000, 7);
