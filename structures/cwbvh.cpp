@@ -168,7 +168,7 @@ uint32_t append_indexed_leaf(const MBVH<8, 8>& m, uint32_t ref, aligned_vector<C
   };
   // Fixed arrays, no allocation per leaf (compress runs this for every leaf of the tree).
   const uint32_t ntris = mbvh_ref::num_tris(ref), first = mbvh_ref::first_block(ref);
-  std::array<Tri, 16> left;  // compress refuses leaves of more than 16 triangles
+  std::array<Tri, kCWMaxLeafTris> left;  // compress refuses larger leaves
   uint32_t nleft = 0;
   for (uint32_t t = 0; t < ntris; ++t) {
     const TriBlock<8>& b = m.blocks[first + t / 8];
@@ -279,7 +279,9 @@ CWBVH CWBVH::compress(const MBVH<8, 8>& m, double full_share, CWSlots slots, CWL
   // Appends a leaf's blocks; returns its triangle count (indexed: its block count).
   const auto copy_leaf = [&](uint32_t ref) {
     const uint32_t ntris = mbvh_ref::num_tris(ref), nblocks = (ntris + 7) / 8;
-    if (ntris > 16) throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most 16: merge <= 16)");
+    if (ntris > kCWMaxLeafTris)
+      throw std::invalid_argument("cwbvh: a leaf of " + std::to_string(ntris) + " triangles (at most " +
+                                  std::to_string(kCWMaxLeafTris) + ": merge <= " + std::to_string(kCWMaxLeafTris) + ")");
     out.stats.leaves++;
     if (indexed) return append_indexed_leaf(m, ref, out.iblocks);
     for (uint32_t k = 0; k < nblocks; ++k) out.blocks.push_back(m.blocks[mbvh_ref::first_block(ref) + k]);

@@ -160,7 +160,9 @@ std::array<int8_t, 8> cw_octant_slots(const MBVHNode<8>& n);
 std::array<int8_t, 8> cw_slots(const MBVHNode<8>& n, CWSlots slots);
 
 // The compressed leaf reference: kLeaf | first block << 4 | (triangles - 1), at most 16 triangles
-// and 2^27 blocks. cw_leaf_to_mbvh gives the MBVH reference the leaf kernels take.
+// (kCWMaxLeafTris: the count's 4 bits; indexed leaves keep the limit, so one tree serves both) and
+// 2^27 blocks. cw_leaf_to_mbvh gives the MBVH reference the leaf kernels take.
+inline constexpr uint32_t kCWMaxLeafTris = 16;
 inline constexpr uint32_t kCWMaxBlocks = 1u << 27;
 constexpr uint32_t cw_leaf_ref(uint32_t first_block, uint32_t ntris) { return mbvh_ref::kLeaf | first_block << 4 | (ntris - 1); }
 // With indexed leaves (CWLeaves::indexed) a leaf reference is kLeaf | its first CWTriBlock (the

@@ -72,8 +72,10 @@ std::shared_ptr<const CWBVH> fetch_cwbvh(const Scene& scene, StructureCache& cac
 }
 
 void check_cwbvh_params(const MBVHBuildParams& params, const std::string& prefix) {
-  if (params.merge > 16) throw InputError(prefix + "merge must be <= 16 (a compressed leaf holds at most 16 triangles)");
-  if (params.bvh.max_leaf > 16) throw InputError(prefix + "leaf_size must be <= 16 (a compressed leaf holds at most 16 triangles)");
+  const int most = int(kCWMaxLeafTris);
+  const std::string why = " (a compressed leaf holds at most " + std::to_string(most) + " triangles)";
+  if (params.merge > most) throw InputError(prefix + "merge must be <= " + std::to_string(most) + why);
+  if (params.bvh.max_leaf > most) throw InputError(prefix + "leaf_size must be <= " + std::to_string(most) + why);
 }
 
 template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);
