@@ -96,6 +96,19 @@ COSTED_BELOW = (
     "the thesis' range (it executes more instructions per ray than single-ray), so less work is not what puts it "
     "above; it is above the range in time "
     "because the rate estimates printed exceed 1 — " + RATE_WHY + ".")
+# The thread-scaling check of Table 1 (table1()): why refit kept up with rebuild at a size, and what
+# would test the claim.
+T1_STARVED = (
+    "the 4-thread rebuild kept less than 1.5 of the 2 cores busy (its cpu/wall, printed above; 4 busy threads "
+    "would give ~2 on this 2-core VM, 4 on the thesis' quad core): other processes at the printed 1-minute load, "
+    "or a build of a few milliseconds whose top-level splits run on one thread; a build that gets ~1 core is not "
+    "sped up, so the ratios compare noise (`build_cpu_ms`, `loadavg` in build.csv)")
+T1_CAPPED = (
+    "both speedups are at least 1.6x of the 2x that this VM's 2 hardware threads allow (the four objects are "
+    "refitted in parallel as they are rebuilt), where which is larger is noise")
+T1_RERUN = (
+    "The thesis' quad core let its rebuilds reach 3.8-4.2x where its refits stopped at 1.4-1.8x: re-run on a quiet "
+    "machine with 4 cores to test the claim.")
 EXPLAIN = {
     # The pathtrace explanations are filled in by pathtrace() from the measured CSVs (rmse over
     # several seeds, pathtrace.depth.csv); these are the fallbacks for CSVs without those columns.
@@ -109,23 +122,10 @@ EXPLAIN = {
     "t14.best": (
         "DPT's frame costs less CPU time than SPT's (fewer rays per sample: truncation after log2(spp)+1 "
         "segments, in full packets of one depth) while its rmse is not higher in these all-diffuse scenes."),
-    "t1.threads_rebuild_more@starved": (
-        "measured: where refit is not behind, the 4-thread rebuild kept less than 1.5 of the 2 cores busy (its "
-        "cpu/wall, printed above; 4 busy threads would give ~2 on this 2-core VM, 4 on the thesis' quad core): "
-        "other processes at the printed 1-minute load, or a build of a few milliseconds whose top-level splits "
-        "run on one thread. A build that gets ~1 core is not sped up, so the ratios compare noise. "
-        "`build_cpu_ms`, `loadavg` in build.csv; re-run on a quiet machine with 4 cores."),
-    "t1.threads_rebuild_more@capped": (
-        "measured: at the sizes where refit is not behind, both speedups are at least 1.6x of the 2x that this "
-        "VM's 2 hardware threads allow (the four objects are refitted in parallel as they are rebuilt), so "
-        "which is larger is noise; the thesis' quad core let its rebuilds reach 3.8-4.2x where its refits "
-        "stopped at 1.4-1.8x. Re-run on a machine with 4 cores to test the claim."),
+    "t1.threads_rebuild_more@starved": "measured: where refit is not behind, " + T1_STARVED + ". " + T1_RERUN,
+    "t1.threads_rebuild_more@capped": "measured: where refit is not behind, " + T1_CAPPED + ". " + T1_RERUN,
     "t1.threads_rebuild_more@starved_capped": (
-        "measured: where refit is not behind, either the 4-thread rebuild had no free core (its cpu/wall, "
-        "printed above, under 1.5: a build that gets ~1 core is not sped up) or both speedups are at least "
-        "1.6x of the 2x that this VM's 2 hardware threads allow, where which is larger is noise; the thesis' "
-        "quad core let its rebuilds reach 3.8-4.2x where its refits stopped at 1.4-1.8x. Re-run on a quiet "
-        "machine with 4 cores to test the claim."),
+        "measured: where refit is not behind, either " + T1_STARVED + ", or " + T1_CAPPED + ". " + T1_RERUN),
     "t2-4.monotone@uncalibrated": (
         "documented: this CSV predates the calibration (256², the views' 55–70° fov: its D = 1 is already "
         "0.23–0.31° between adjacent rays, the thesis' D ≈ 7–9; docs/WORKLOADS.md), so its D ≤ 8 rows are the "
