@@ -283,7 +283,7 @@ bool cw_traverse_from(const CWBVH& t, const CWRay& r, const TriRay<8>& tr, MBVHC
     const int mask = S::mask(entered);
     if (!mask) return false;
     if constexpr (O == CWOrder::branching) {
-      const auto prefetch = [&](uint32_t c) {
+      const auto prefetch = [&](uint32_t c) __attribute__((always_inline)) {  // inline: enter_branching
         if (mbvh_ref::is_leaf(c)) return;
         const char* a = reinterpret_cast<const char*>(cw_node_address(t, c));
         if (c & kCWFull) {

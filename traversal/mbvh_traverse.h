@@ -356,8 +356,9 @@ template <int N, int W>
 // Starts fetching a node that goes onto the stack: single-ray traversal is bound by the latency
 // of one dependent node fetch after another, and a pushed child is usually visited (it was
 // entered before the closest hit known so far).
+// Forced inline, as every function between a traversal and its prefetch (see enter_branching).
 template <int N, int W>
-inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
+[[gnu::always_inline]] inline void prefetch_ref(const MBVH<N, W>& m, uint32_t ref) {
   if (mbvh_ref::is_leaf(ref)) return;
   const char* p = reinterpret_cast<const char*>(&m.nodes[ref]);
   for (size_t l = 0; l < sizeof(MBVHNode<N>); l += 64) _mm_prefetch(p + l, _MM_HINT_T0);
@@ -523,6 +524,14 @@ inline bool sorts_batch(OrderParam o, const RayBatch& batch) {
 // (sp advanced). ref(i) is child i's reference, prefetch(ref) starts fetching a pushed child,
 // sorted(count, out) is push_sorted on the node (returns the nearest). Shared by mbvh_traverse and
 // cwbvh_single, whose nodes form their references differently.
+// A `prefetch` lambda must be forced inline (__attribute__((always_inline)) after its parameters),
+// and so must every function it calls on the way to _mm_prefetch: GCC 12 counts __builtin_prefetch
+// as no side effect, so its local pure-const pass finds a function that only prefetches "looping
+// pure", and a call of a pure function that returns nothing is dead code and deleted. Until
+// session 35 the branching order of mbvh8_single and cwbvh_single had no prefetch in their
+// compiled code for that reason (mbvh4_single kept its own, where the node array's operator[]
+// stayed a call); restored, primary rays moved within the noise (2 alternating pairs of processes
+// on five scenes, docs/PERFORMANCE.md, session 35).
 template <int N, class Ref, class Prefetch, class Sorted, class P>
 [[gnu::always_inline]] inline uint32_t enter_branching(int mask, typename simd::V<N>::f tn, Ref&& ref,
                                                        Prefetch&& prefetch, Sorted&& sorted, MBVHStackEntry* stack,
@@ -617,7 +626,8 @@ inline bool mbvh_traverse_from(const MBVH<N, W>& m, const TriangleSet* ts, const
         }
       } else if (mask) {
         cur = enter_branching<N>(
-            mask, tn, [&](uint32_t i) { return nd.ref[i]; }, [&](uint32_t ref) { prefetch_ref(m, ref); },
+            mask, tn, [&](uint32_t i) { return nd.ref[i]; },
+            [&](uint32_t ref) __attribute__((always_inline)) { prefetch_ref(m, ref); },  // inline: enter_branching
             [&](int count, MBVHStackEntry* out) {
               const uint32_t first = push_sorted<N>(nd, tn, entered, count, out);
               // N = 8: the nearest by the min reduction beside the network, not after it.
