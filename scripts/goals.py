@@ -13,7 +13,7 @@ import sys
 from collections import defaultdict
 
 SINGLE = ["bvh_single", "mbvh4_single", "mbvh8_single", "cwbvh_single", "kd_single"]
-BATCH = ["mbvh_rs", "raygrid"]
+BATCH = ["mbvh_rs", "raygrid", "mbvh8_interleave"]
 PACKET = ["bvh_masked", "bvh_ranged", "bvh_partition", "mbvh8_packet", "kd_packet"]
 
 

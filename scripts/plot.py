@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 SCHEME_ORDER = [
     "bvh_single", "mbvh4_single", "mbvh8_single", "kd_single", "kd_packet", "bvh_masked", "bvh_ranged",
     "bvh_partition", "mbvh_rs", "raygrid", "cwbvh_single", "treelet_queue", "embree_single", "embree_packet8", "embree_stream", "reference",
-    "mbvh8_packet", "simt_bvh",
+    "mbvh8_packet", "simt_bvh", "mbvh8_interleave",
 ]
 _palette = plt.get_cmap("tab20").colors
 

@@ -123,15 +123,9 @@ void expect_hits_of(const std::string& tree) {
       cfg.params = {{"treelet_bytes", budget}, {"rays_in_flight", "500"}, {"tree", tree}};
       auto t = make_scheme("treelet_queue", cfg);
       t->prepare(bench.scene(), bench.cache());
-      for (const auto& w : workloads) {
-        const RayBatch& b = bench.rays(test::small_spec(w, 48));
-        std::vector<Hit> a(b.size()), q(b.size());
-        trace_batch(*ref, b, a, 1);
-        trace_batch(*t, b, q, 2);
-        size_t differ = 0;
-        for (size_t i = 0; i < b.size(); ++i) differ += std::memcmp(&a[i], &q[i], sizeof(Hit)) != 0;
-        EXPECT_EQ(differ, 0u) << scene << " / " << w << " treelet_bytes=" << budget << " tree=" << tree;
-      }
+      for (const auto& w : workloads)
+        EXPECT_EQ(test::differing_hits(*ref, *t, bench.rays(test::small_spec(w, 48))), 0u)
+            << scene << " / " << w << " treelet_bytes=" << budget << " tree=" << tree;
     }
   }
 }

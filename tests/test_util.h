@@ -2,6 +2,7 @@
 #pragma once
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -41,6 +42,17 @@ inline Accuracy accuracy_of(Bench& bench, const std::string& scheme, const Workl
   std::vector<Hit> hits(b.size());
   trace_batch(*t, b, hits, 2);
   return compare_hits(hits, bench.reference_hits(spec));
+}
+
+// How many rays of `b` get a hit from `b_scheme` (traced on 2 threads) that is not bit for bit the
+// one `a_scheme` (1 thread) gives: 0 for two schemes that make the same visits in the same order.
+inline size_t differing_hits(const Traverser& a_scheme, const Traverser& b_scheme, const RayBatch& b) {
+  std::vector<Hit> a(b.size()), q(b.size());
+  trace_batch(a_scheme, b, a, 1);
+  trace_batch(b_scheme, b, q, 2);
+  size_t differ = 0;
+  for (size_t i = 0; i < b.size(); ++i) differ += std::memcmp(&a[i], &q[i], sizeof(Hit)) != 0;
+  return differ;
 }
 
 // Every registered scheme but the reference itself (baselines too, unless `ours_only`).
