@@ -23,6 +23,12 @@
 // sibenik_lucy 1.20-1.24), where mbvh_rs gains 1.2-1.4x: there a visit waits less on memory than on
 // its own instructions and branches, and with the prefetch left out the interleaving itself costs
 // 0-3%. More rays than ~16 crowd the L1's outstanding misses (a prefetch then stalls at issue).
+// Camera rays lose (0.74-0.84x on sponza and dragon_100k primary; 0.63-0.75x on spheres:2000000,
+// crytek_sponza_partial and sibenik_lucy): neighbouring coherent rays find each other's nodes in
+// the L1 and make the same branch decisions one after another, and interleaving spreads both out;
+// with 2 rays 0.93-1.00x. A first version on cwbvh_single's compressed tree (cw_traverse_from,
+// two-line nodes) read only 1.05x of mbvh8_single on spheres:2000000 bounce:2 (this tree: 2.28x,
+// cwbvh_single alone 1.19x); why was not found this session, and it was not kept.
 //
 // Parameters: the MBVH8 ones of mbvh8_single (same defaults, so the tree is shared), `rays` (in
 // flight) and `order` (mbvh8_single's: auto = branching for common-origin batches, sort_always
