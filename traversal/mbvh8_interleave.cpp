@@ -11,7 +11,7 @@
 // the time it resumes its lines have arrived. Each ray runs mbvh8_single's loop (mbvh_traverse_from)
 // on mbvh8_single's cached tree, suspended between two visits exactly as treelet_queue suspends it
 // at treelet edges, so it visits the same nodes and leaves in the same order as mbvh8_single with
-// the same child order, and its hits are bit-identical (tests/test_schemes.cpp). Not a
+// the same child order, and its hits are bit-identical (tests/test_mbvh.cpp). Not a
 // single-ray scheme: like embree_stream it needs the batch's rays ahead of time, so it is one of
 // the batch schemes of issue 17's goals.
 //
