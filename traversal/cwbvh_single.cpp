@@ -80,7 +80,7 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const CWBVH& t = *cw_;
-    std::vector<MBVHStackEntry> stack(size_t(7) * t.stats.max_depth + 10);
+    std::vector<MBVHStackEntry> stack(mbvh_stack_entries(8, t.stats.max_depth));
     const CWOrder order = order_ == OrderParam::octant ? CWOrder::octant
                           : !sorts_batch(order_, batch)   ? CWOrder::branching
                           : prefetch_                     ? CWOrder::sort_prefetch

@@ -72,7 +72,7 @@ class MBVH8Interleave final : public MBVHScheme<MBVH8Interleave, MBVHData<8, 8>>
     const uint32_t end = batch.packet_begin[range.last];
     if (next >= end) return;
     const uint32_t flight = std::min(flight_, end - next);
-    const size_t cap = size_t(7) * m.stats.max_depth + 10;  // mbvh_traverse's stack bound for N = 8
+    const size_t cap = mbvh_stack_entries(8, m.stats.max_depth);
     std::vector<Slot> slots(flight);  // over-aligned: C++17's aligned new
     std::vector<MBVHStackEntry> stacks(flight * cap);
     const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
@@ -137,9 +137,7 @@ std::unique_ptr<Traverser> make_mbvh8_interleave(const SchemeConfig& cfg) {
 ParamSpecs params_mbvh8_interleave() {
   return mbvh_param_specs(kMBVH8Defaults) +
          ParamSpecs{int_param("rays", 12, 1, 1024, "rays in flight, each visiting one node or leaf per turn"),
-                    choice_param("order", "auto", {"auto", "sort", "branching"},
-                                 "child order, as mbvh8_single's: auto = branching for common-origin batches, "
-                                 "sort_always otherwise")};
+                    mbvh8_order_param()};
 }
 
 }  // namespace tb

@@ -327,7 +327,7 @@ class MBVH8Packet final : public MBVHScheme<MBVH8Packet, MBVHData<8, 8>> {
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
     const MBVHData<8, 8>& d = std::get<0>(data_.data);
-    const size_t depth = size_t(7) * d.mbvh->stats.max_depth + 10;
+    const size_t depth = mbvh_stack_entries(8, d.mbvh->stats.max_depth);
     auto grp = std::make_unique<Group>();
     std::vector<GroupEntry> stack(depth);
     std::vector<MBVHStackEntry> single(depth);

@@ -84,9 +84,7 @@ std::unique_ptr<Traverser> make_mbvh8_single(const SchemeConfig& cfg) { return s
 ParamSpecs params_mbvh8_single() {
   return mbvh_param_specs(kDefaults) +
          ParamSpecs{int_choice_param("tri_width", 8, {4, 8}, "triangles per leaf block: 4 (SSE) or 8 (AVX2)"),
-                    choice_param("order", "auto", {"auto", "sort", "branching"},
-                                 "child order (ChildOrder, watertight 8-wide blocks): sort = sort_always, branching, "
-                                 "auto = branching for common-origin batches, sort_always otherwise")} +
+                    mbvh8_order_param()} +
          prefetch_param_specs();
 }
 

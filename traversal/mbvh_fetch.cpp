@@ -24,6 +24,12 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
                                   : int_choice_param("small", 0, {0}, "always 0: this scheme's leaves are 4-wide blocks")};
 }
 
+ParamSpec mbvh8_order_param() {
+  return choice_param("order", "auto", {"auto", "sort", "branching"},
+                      "child order (ChildOrder, watertight 8-wide blocks): sort = sort_always, branching, "
+                      "auto = branching for common-origin batches, sort_always otherwise");
+}
+
 ParamSpecs prefetch_param_specs() {
   return {choice_param("prefetch", "auto", {"auto", "on", "off"},
                        "sorted batches fetch the second-nearest entered child early: on, off, or auto = when the "

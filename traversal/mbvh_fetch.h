@@ -47,6 +47,9 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d);
 // it does (docs/PERFORMANCE.md, session 22), so `auto` compares the structure's bytes with
 // llc_mib. A parameter rather than a query: this VM's sysconf and CPUID report a 508 MiB L3.
 ParamSpecs prefetch_param_specs();
+// `order` (auto | sort | branching; parse_order_param) of the schemes that run mbvh8_single's loop
+// on its MBVH8 (mbvh8_single, mbvh8_interleave).
+ParamSpec mbvh8_order_param();
 // Whether a structure of `bytes` (nodes and triangle blocks) gets the early fetch under `cfg`.
 bool prefetch_second_child(const SchemeConfig& cfg, size_t bytes);
 // What structure_info() appends so the build table and logs say which variant runs.

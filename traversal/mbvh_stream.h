@@ -361,13 +361,13 @@ struct Scratch {
   // (root = 1). Per lane at most one pending task per tree level (siblings use distinct lanes,
   // and a task's children are all consumed before its next sibling), each with at most a
   // stream, plus pack_lane's slack; tasks: n - 1 siblings pending per level; the one-ray stack:
-  // mbvh_traverse's (n - 1) * depth + n.
+  // mbvh_stack_entries.
   void reserve(int n, uint32_t depth, uint32_t rays) {
     for (int l = 0; l < n; ++l)
       if (lanes[l].size() < size_t(depth + 1) * rays + 32) lanes[l].resize(size_t(depth + 1) * rays + 32);
     if (masks.size() < size_t(rays) + 32) masks.resize(size_t(rays) + 32);
     if (tasks.size() < size_t(n - 1) * depth + 2) tasks.resize(size_t(n - 1) * depth + 2);
-    if (single.size() < size_t(n - 1) * depth + n + 2) single.resize(size_t(n - 1) * depth + n + 2);
+    if (single.size() < mbvh_stack_entries(n, depth)) single.resize(mbvh_stack_entries(n, depth));
   }
 };
 

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -388,6 +389,10 @@ struct MBVHStackEntry {
   uint32_t ref;
   float dist;  // entry distance: popped entries at or beyond the closest hit are skipped
 };
+// The entries a stack of mbvh_traverse_from (or cw_traverse_from) is given on an N-wide tree whose
+// deepest leaf is at `max_depth` (root = 1): at most (N-1) pending per level, plus room for
+// push_sorted's whole-vector store of N entries past the top (see mbvh_traverse_from).
+constexpr size_t mbvh_stack_entries(int n, uint32_t max_depth) { return size_t(n - 1) * max_depth + n + 2; }
 
 // Pops the nearest pending child that may still hold a closer hit than `tfar` into `cur`
 // (entries beyond it are dropped); false when the stack runs empty.
@@ -673,7 +678,7 @@ template <int N, int W, TriKernel K, ChildOrder O = ChildOrder::branching, bool 
 void mbvh_trace_rays(const MBVHData<N, W>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                      P& probe) {
   const MBVH<N, W>& m = *d.mbvh;
-  std::vector<MBVHStackEntry> stack(size_t(N - 1) * m.stats.max_depth + N + 2);
+  std::vector<MBVHStackEntry> stack(mbvh_stack_entries(N, m.stats.max_depth));
   const RayCtx::ShearAxes axes = RayCtx::axes_for(batch.common_origin);
   for_each_ray(batch, range, hits, probe, [&](const Ray& ray, Hit& hit) {
     const RayCtx rc(ray, axes);

@@ -161,8 +161,7 @@ class TreeletQueue final : public TraverserBase<TreeletQueue> {
       return;
     }
     const uint32_t flight = std::min(flight_, end - next);
-    // mbvh_traverse's stack bound for N = 8 (cw_traverse_from's alike)
-    const size_t cap = size_t(7) * (compressed_ ? cw_->stats.max_depth : data_.mbvh->stats.max_depth) + 10;
+    const size_t cap = mbvh_stack_entries(8, compressed_ ? cw_->stats.max_depth : data_.mbvh->stats.max_depth);
     const uint32_t root_ref = compressed_ ? cw_->root : 0;
     // The treelet a reference belongs to, as the entry the leave test reads.
     const auto entry = [&](uint32_t ref) -> const uint32_t& { return compressed_ ? tl.cw_entry(ref) : tl.entry(ref); };
