@@ -64,12 +64,15 @@ std::string thesis_layout(const std::string& scheme, SchemeConfig& cfg) {
     // The thesis' streams: Table 8 counts rays per node "out of the original 256 rays in a 16x16
     // ray packet" (mbvh_rs's own default is longer: traversal/mbvh_rs.cpp).
     if (scheme == "mbvh_rs" && !cfg.params.count("stream")) cfg.params.emplace("stream", "256");
+    // ... in the batch's order (its packets), not re-sorted by origin as mbvh_rs's default sorts.
+    if (scheme == "mbvh_rs" && !cfg.params.count("sort")) cfg.params.emplace("sort", "none");
     // ... sorted by their rays' summed entry distances (Alg. 2.10; the schemes' default is the mean).
     if (!cfg.params.count("task_order")) cfg.params.emplace("task_order", "sum");
   }
   std::string label = "width=" + cfg.params["width"];
   if (scheme == "raygrid" && cfg.params.count("queue")) label += " queue=" + cfg.params["queue"];
   if (scheme == "mbvh_rs" && cfg.params.count("stream")) label += " stream=" + cfg.params["stream"];
+  if (scheme == "mbvh_rs" && cfg.params.count("sort")) label += " sort=" + cfg.params["sort"];
   if (cfg.params.count("task_order")) label += " task_order=" + cfg.params["task_order"];
   return label;
 }

@@ -49,15 +49,17 @@ TEST(TableLabels, EntriesWithParametersAreRowsOfTheirOwn) {
   };
   for (const Case& c : {Case{"raygrid", "raygrid", "raygrid:queue=64", "queue=384;task_order=sum;width=4",
                              "queue=64;task_order=sum;width=4"},
-                        Case{"bounce", "mbvh_rs", "mbvh_rs:stream=512", "stream=256;task_order=sum;width=4",
-                             "stream=512;task_order=sum;width=4"}}) {
+                        Case{"bounce", "mbvh_rs", "mbvh_rs:stream=512", "sort=none;stream=256;task_order=sum;width=4",
+                             "sort=none;stream=512;task_order=sum;width=4"}}) {
     SCOPED_TRACE(c.table);
     const CsvTable t = run_small_table(c.table, "room", {c.plain, c.entry}, 16, dir);
     const std::string kind = c.plain == "raygrid" ? "queue=" : "stream=";
-    // The layout column spells the same settings: width, then M or the stream length, then the order.
+    // The layout column spells the same settings: width, then M or the stream length (and the
+    // streams' ray order, the batch's own), then the order of the children.
     auto layout = [&](const std::string& params) {
       const size_t at = params.find(kind);
-      return "width=4 " + params.substr(at, params.find(';', at) - at) + " task_order=sum";
+      return "width=4 " + params.substr(at, params.find(';', at) - at) + (kind == "stream=" ? " sort=none" : "") +
+             " task_order=sum";
     };
     using P = std::set<std::pair<std::string, std::string>>;
     EXPECT_EQ(rows_of(t, c.plain), (P{{c.plain_params, layout(c.plain_params)}}));

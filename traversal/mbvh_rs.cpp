@@ -12,8 +12,14 @@
 // an octree leaf's queue over that leaf's mini-MBVH, thesis §5.3).
 //
 // Streams are consecutive packets of the batch, grouped up to `stream` rays (parameter); a packet
-// larger than that is cut. A stream's rays are copied into SoA arrays and their per-ray constants
-// computed eight rays per AVX2 instruction into a 128-byte record per ray (mbvh_stream::prepare).
+// larger than that is cut. Unless the batch is coherent already (camera rays, first bounces), its
+// rays are first sorted by the Morton cell of their origins (`sort`, traversal/ray_order.h: ray
+// reordering, Pharr et al. 1997, Moon et al. 2010), so that a stream holds rays that start near
+// each other and share the nodes they visit: bounce:3, in-process interleaved rounds against
+// sort=none, sponza 1.15x, sibenik 1.10x, sibenik_lucy and crytek_sponza_partial 1.22x,
+// conference 1.00x (docs/PERFORMANCE.md, "Session 36"); the thesis tables run sort=none. A
+// stream's rays are copied into SoA arrays and their per-ray constants computed eight rays per
+// AVX2 instruction into a 128-byte record per ray (mbvh_stream::prepare).
 //
 // The default stream is 8192 rays, not the thesis' 256 (Tsakok and the thesis found 256-1024
 // best on their machines, §5.2.4; the thesis tables still run 256, harness/tables.cpp):
@@ -38,6 +44,7 @@
 #include "traversal/mbvh_traverse.h"
 #include "traversal/bvh_common.h"
 #include "traversal/mbvh_stream.h"
+#include "traversal/ray_order.h"
 #include "traversal/scratch_pool.h"
 
 namespace tb {
@@ -47,6 +54,15 @@ namespace {
 // header comment); width=4 gives the thesis' layout (tests/test_mbvh.cpp pins it there to compare
 // with mbvh4_single's tree).
 constexpr int kDefaultWidth = 8;
+// sort: auto sorts a batch of more than one stream whose neighbouring rays mostly start in
+// different cells of the order (bounce:2 and later 84-94% on sponza, conference, room, stadium;
+// first-bounce rays 1-5%, which sorting slowed by 7-13%); origin sorts every batch; none keeps
+// the batch's packets (the thesis' streams).
+enum class Sort { auto_, origin, none };
+Sort sort_of(const std::string& v) { return v == "auto" ? Sort::auto_ : v == "origin" ? Sort::origin : Sort::none; }
+constexpr double kMinChange = 0.5;
+// Rays fetched ahead by the sorted path's gather of the rays and scatter of the hits.
+constexpr uint32_t kAhead = 48;
 // Rays per stream: see the header comment.
 constexpr int kDefaultStream = 8192;
 // 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
@@ -59,7 +75,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   // width=4: layout 0 with the thesis' defaults; width=8: layout 1.
   explicit MBVHRayStream(const SchemeConfig& cfg)
       : MBVHScheme(cfg, cfg.get_int("width") == 4 ? kDefaults4 : kDefaults8, cfg.get_int("width") == 4 ? 0 : 1),
-        stream_(cfg.get_int("stream")), order_(mbvh_stream::order_of(cfg)) {}
+        stream_(cfg.get_int("stream")), order_(mbvh_stream::order_of(cfg)), sort_(sort_of(cfg.get_choice("sort"))) {}
   std::string_view name() const override { return "mbvh_rs"; }
   std::string structure_info() const override { return MBVHScheme::structure_info() + " stream=" + std::to_string(stream_); }
   // A stream is formed from the rays of one call: multi-threaded runs hand out chunks of 16
@@ -84,6 +100,9 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     aligned_vector<float> f;
     aligned_vector<mbvh_stream::RayRecord> rec;
     mbvh_stream::Scratch st;
+    RayOrder order;         // sort: the call's rays in the Morton order of their origins' cells
+    std::vector<Ray> rays;  // ... gathered in that order
+    std::vector<Hit> hits;  // ... and their hits, in the same order
   };
 
   template <int N, TriKernel K, class P>
@@ -102,28 +121,69 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     if (s.rec.size() < (S + 7) / 8 * 8) s.rec.resize((S + 7) / 8 * 8);
     s.st.reserve(N, d.mbvh->stats.max_depth + 1, S);
 
-    uint32_t begin = batch.packet_begin[range.first], end = begin;
-    for (uint32_t p = range.first; p < range.last; ++p) {
-      const uint32_t pend = batch.packet_begin[p + 1];
-      if (pend - begin > S && end > begin) {  // this packet does not fit: flush what we have
-        trace_stream<N, K>(d, batch, begin, end, hits, s, probe);
-        begin = end;
+    // (A batch whose rays share one origin, camera rays, has nothing to sort.)
+    if (!(sort_ != Sort::none && !batch.common_origin && trace_sorted<N, K>(d, batch, range, hits, S, s, probe))) {
+      uint32_t begin = batch.packet_begin[range.first], end = begin;
+      auto stream = [&](uint32_t from, uint32_t to) {
+        trace_stream<N, K>(d, &batch.rays[from], to - from, &hits[from], s, probe);
+      };
+      for (uint32_t p = range.first; p < range.last; ++p) {
+        const uint32_t pend = batch.packet_begin[p + 1];
+        if (pend - begin > S && end > begin) {  // this packet does not fit: flush what we have
+          stream(begin, end);
+          begin = end;
+        }
+        while (pend - begin > S) {  // a packet larger than a stream is cut
+          stream(begin, begin + S);
+          begin += S;
+        }
+        end = pend;
       }
-      while (pend - begin > S) {  // a packet larger than a stream is cut
-        trace_stream<N, K>(d, batch, begin, begin + S, hits, s, probe);
-        begin += S;
-      }
-      end = pend;
+      if (end > begin) stream(begin, end);
     }
-    if (end > begin) trace_stream<N, K>(d, batch, begin, end, hits, s, probe);
     pool_.release(std::move(sp));
   }
 
-  // Algorithm 2.9 on rays [first, last) of the batch.
+  // sort=origin (and auto): streams of S consecutive rays in the order of their origins (packets
+  // ignored: the order groups the rays that start near each other, wherever their pixels were).
+  // The rays are gathered into that order first and the hits scattered back last, each in a loop
+  // of its own that fetches kAhead rays ahead: the batch is mostly out of the caches by then, and
+  // reading it ray by ray inside the streams cost 5-17% more (sponza, crytek, conference
+  // bounce:3). (The prefetches sit in the loops themselves: GCC deletes a prefetch-only helper
+  // that it does not inline, mbvh_traverse.h's enter_branching.) False,
+  // having traced nothing, when the order keeps the batch's own (sort=auto and one stream or a
+  // coherent batch; every ray in one cell).
   template <int N, TriKernel K, class P>
-  void trace_stream(const MBVHData<N, 4>& d, const RayBatch& batch, uint32_t first, uint32_t last,
-                    std::span<Hit> out, Scratch& s, P& probe) const {
-    const uint32_t n = last - first;
+  bool trace_sorted(const MBVHData<N, 4>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
+                    uint32_t S, Scratch& s, P& probe) const {
+    const uint32_t first = batch.packet_begin[range.first], n = batch.packet_begin[range.last] - first;
+    if (sort_ == Sort::auto_ && n <= S) return false;  // one stream: the order cannot regroup it
+    s.order.sort(batch.rays, first, first + n, sort_ == Sort::auto_ ? kMinChange : 0.0, probe);
+    if (!s.order.moved()) return false;
+    s.rays.resize(n);
+    s.hits.resize(n);
+    for (uint32_t j = 0; j < n; ++j) {
+      if (j + kAhead < n) __builtin_prefetch(&batch.rays[s.order.index(j + kAhead)], 0);
+      const Ray& r = batch.rays[s.order.index(j)];
+      s.rays[j] = r;
+      probe.read(&r, sizeof(Ray));
+      probe.write(&s.rays[j], sizeof(Ray));
+    }
+    for (uint32_t b = 0; b < n; b += S)
+      trace_stream<N, K>(d, s.rays.data() + b, std::min(S, n - b), s.hits.data() + b, s, probe);
+    for (uint32_t j = 0; j < n; ++j) {
+      if (j + kAhead < n) __builtin_prefetch(&hits[s.order.index(j + kAhead)], 1);
+      Hit& h = hits[s.order.index(j)];
+      h = s.hits[j];
+      probe.read(&s.hits[j], sizeof(Hit));
+      probe.write(&h, sizeof(Hit));
+    }
+    return true;
+  }
+
+  // Algorithm 2.9 on the n rays at `rays`, their hits to `out`.
+  template <int N, TriKernel K, class P>
+  void trace_stream(const MBVHData<N, 4>& d, const Ray* rays, uint32_t n, Hit* out, Scratch& s, P& probe) const {
     if constexpr (P::enabled)
       if (probe.counts) probe.counts->rays += n;
     float* f = s.f.data();
@@ -131,7 +191,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     const mbvh_stream::Rays v{f + kOX * mp, f + kOY * mp, f + kOZ * mp, f + kDX * mp, f + kDY * mp, f + kDZ * mp,
                               f + kTmin * mp, nullptr, nullptr, nullptr, s.rec.data()};
     for (uint32_t j = 0; j < n; ++j) {
-      const Ray& ray = batch.rays[first + j];
+      const Ray& ray = rays[j];
       probe.read(&ray, sizeof(Ray));
       f[kOX * mp + j] = ray.org.x, f[kOY * mp + j] = ray.org.y, f[kOZ * mp + j] = ray.org.z;
       f[kDX * mp + j] = ray.dir.x, f[kDY * mp + j] = ray.dir.y, f[kDZ * mp + j] = ray.dir.z;
@@ -145,13 +205,15 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     mbvh_stream::prepare(v, n, d.mbvh->coord_bound);
     mbvh_stream::trace<N, K>(*d.mbvh, d.tris.get(), s.st, v, n, 0, order_, probe);
     for (uint32_t j = 0; j < n; ++j) {
-      out[first + j] = finish_hit(s.rec[j].hit);
-      probe.write(&out[first + j], sizeof(Hit));
+      Hit& h = out[j];
+      h = finish_hit(s.rec[j].hit);
+      probe.write(&h, sizeof(Hit));
     }
   }
 
   int stream_;
   mbvh_stream::Order order_;
+  Sort sort_;
   ScratchPool<Scratch> pool_;  // one record per concurrent call
 };
 
@@ -166,7 +228,11 @@ ParamSpecs params_mbvh_rs() {
   return p + ParamSpecs{int_choice_param("width", kDefaultWidth, {4, 8}, "MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
                         int_param("stream", kDefaultStream, 1, 65536,
                                   "most rays per stream (consecutive packets of the batch; the thesis tables run 256)"),
-                        mbvh_stream::order_param()};
+                        mbvh_stream::order_param(),
+                        choice_param("sort", "auto", {"auto", "origin", "none"},
+                                     "stream order: origin = the call's rays sorted by the Morton cell of their origins "
+                                     "(traversal/ray_order.h, timed); auto = origin for incoherent batches (bounce:2 on) "
+                                     "of more than one stream; none = the batch's packets in turn (the thesis)")};
 }
 
 }  // namespace tb
