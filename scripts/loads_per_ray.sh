@@ -28,7 +28,7 @@ work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 # scheme|parameters: mbvh_rs and raygrid in the thesis' 4-wide layout, as `table cache` runs them.
 # One valgrind process per cell (callgrind's totals are per process), the three side by side.
-cells=("mbvh_rs|--param width=4" "raygrid|--param width=4 --param queue=256" "mbvh4_single|")
+cells=("mbvh_rs|--param width=4 --param sort=none" "raygrid|--param width=4 --param queue=256" "mbvh4_single|")
 measure() {
   local s=${1%%|*} p=${1#*|}
   echo "loads_per_ray: $s bounce:2 on $name (${SIZE}x${SIZE}) under callgrind" >&2

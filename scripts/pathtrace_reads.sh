@@ -73,7 +73,7 @@ PY
 rm -f "${parts[@]}"
 
 # scheme|parameters: as `table cache` and scripts/loads_per_ray.sh run them (the thesis' 4-wide layout).
-cells=("mbvh_rs|--param width=4" "raygrid|--param width=4 --param queue=256")
+cells=("mbvh_rs|--param width=4 --param sort=none" "raygrid|--param width=4 --param queue=256")
 simulate() {  # SET TAG SCHEME PARAMS...: the cache simulator in 64-byte lines and in 4-byte words
   local set=$1 tag=$2 s=$3
   shift 3
@@ -108,8 +108,8 @@ done
 IFS=, read -r -a streams <<<"${STREAMS:-512,1024}"
 for n in "${streams[@]}"; do
   echo "pathtrace_reads: mbvh_rs stream=$n on pathtrace (simulator)" >&2
-  simulate pathtrace "pathtrace.mbvh_rs.stream$n" mbvh_rs --param width=4 --param stream="$n"
-  jobs+=("pathtrace|mbvh_rs|--param width=4 --param stream=$n")
+  simulate pathtrace "pathtrace.mbvh_rs.stream$n" mbvh_rs --param width=4 --param sort=none --param stream="$n"
+  jobs+=("pathtrace|mbvh_rs|--param width=4 --param sort=none --param stream=$n")
 done
 mkdir -p "$(dirname "$OUT")"
 /usr/bin/python3 - "$work" "$OUT" "$SIZE" "$METHOD" "$SPP" "${jobs[@]}" <<'PY'

@@ -16,7 +16,7 @@
 // rays are first sorted by the Morton cell of their origins (`sort`, traversal/ray_order.h: ray
 // reordering, Pharr et al. 1997, Moon et al. 2010), so that a stream holds rays that start near
 // each other and share the nodes they visit: bounce:3, in-process interleaved rounds against
-// sort=none, sponza 1.15x, sibenik 1.10x, sibenik_lucy and crytek_sponza_partial 1.22x,
+// sort=none, sponza 1.05-1.15x, sibenik 1.10x, sibenik_lucy and crytek_sponza_partial 1.22x,
 // conference 1.00x (docs/PERFORMANCE.md, "Session 36"); the thesis tables run sort=none. A
 // stream's rays are copied into SoA arrays and their per-ray constants computed eight rays per
 // AVX2 instruction into a 128-byte record per ray (mbvh_stream::prepare).
