@@ -54,13 +54,17 @@ namespace {
 // header comment); width=4 gives the thesis' layout (tests/test_mbvh.cpp pins it there to compare
 // with mbvh4_single's tree).
 constexpr int kDefaultWidth = 8;
-// sort: auto sorts a batch of more than one stream whose neighbouring rays mostly start in
-// different cells of the order (bounce:2 and later 84-94% on sponza, conference, room, stadium;
-// first-bounce rays 1-5%, which sorting slowed by 7-13%); origin sorts every batch; none keeps
-// the batch's packets (the thesis' streams).
+// sort: auto sorts a call of kMinSortedStreams streams' worth of rays or more whose neighbouring
+// rays mostly start in different cells of the order (bounce:2 and later 84-94% on sponza,
+// conference, room, stadium; first-bounce rays 1-5%, which sorting slowed by 7-13%); origin
+// sorts every call; none keeps the batch's packets (the thesis' streams).
 enum class Sort { auto_, origin, none };
 Sort sort_of(const std::string& v) { return v == "auto" ? Sort::auto_ : v == "origin" ? Sort::origin : Sort::none; }
 constexpr double kMinChange = 0.5;
+// The fewest streams' worth of rays in a call that sort=auto sorts: the order pays only by
+// regrouping rays among streams. At one or two streams it cost 2-4% (two-thread runs, whose
+// chunks hold about one stream, sponza and sibenik_lucy; buddha's 17939 bounce:2 rays).
+constexpr uint32_t kMinSortedStreams = 4;
 // Rays fetched ahead by the sorted path's gather of the rays and scatter of the hits.
 constexpr uint32_t kAhead = 48;
 // Rays per stream: see the header comment.
@@ -151,13 +155,13 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   // reading it ray by ray inside the streams cost 5-17% more (sponza, crytek, conference
   // bounce:3). (The prefetches sit in the loops themselves: GCC deletes a prefetch-only helper
   // that it does not inline, mbvh_traverse.h's enter_branching.) False,
-  // having traced nothing, when the order keeps the batch's own (sort=auto and one stream or a
-  // coherent batch; every ray in one cell).
+  // having traced nothing, when the order keeps the batch's own (sort=auto and fewer than
+  // kMinSortedStreams streams or a coherent batch; every ray in one cell).
   template <int N, TriKernel K, class P>
   bool trace_sorted(const MBVHData<N, 4>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                     uint32_t S, Scratch& s, P& probe) const {
     const uint32_t first = batch.packet_begin[range.first], n = batch.packet_begin[range.last] - first;
-    if (sort_ == Sort::auto_ && n <= S) return false;  // one stream: the order cannot regroup it
+    if (sort_ == Sort::auto_ && n < kMinSortedStreams * S) return false;
     s.order.sort(batch.rays, first, first + n, sort_ == Sort::auto_ ? kMinChange : 0.0, probe);
     if (!s.order.moved()) return false;
     s.rays.resize(n);
@@ -232,7 +236,8 @@ ParamSpecs params_mbvh_rs() {
                         choice_param("sort", "auto", {"auto", "origin", "none"},
                                      "stream order: origin = the call's rays sorted by the Morton cell of their origins "
                                      "(traversal/ray_order.h, timed); auto = origin for incoherent batches (bounce:2 on) "
-                                     "of more than one stream; none = the batch's packets in turn (the thesis)")};
+                                     "of " + std::to_string(kMinSortedStreams) +
+                                         " streams or more; none = the batch's packets in turn (the thesis)")};
 }
 
 }  // namespace tb
