@@ -101,6 +101,7 @@ void RayOrder::sort(std::span<const Ray> rays, uint32_t first, uint32_t last, do
     const uint32_t key = uint32_t(_mm_cvtsi128_si32(m)) & (kCells - 1);
     key_[i] = uint8_t(key);
     count4[i & 3][key]++;
+    probe.read(&in[i].org, sizeof(Vec3));
     probe.write(&key_[i], sizeof(uint8_t));
     if (i < kProbe) {
       changes += i > 0 && key_[i] != key_[i - 1];
