@@ -46,7 +46,8 @@ class RayOrder {
   void sort(std::span<const Ray> rays, uint32_t first, uint32_t last, double min_change, P& probe);
   // The index into `rays` of the j-th ray in that order, j in [0, last - first).
   uint32_t index(uint32_t j) const { return moved_ ? index_[j] : first_ + j; }
-  // False when every ray fell into one cell: the order is the rays' own.
+  // False when the order is the rays' own: every ray fell into one cell, or the batch was found
+  // coherent under min_change (index(j) is then first + j).
   bool moved() const { return moved_; }
 
  private:
