@@ -7,6 +7,7 @@
 
 #include "cachesim/hierarchy.h"
 #include "traversal/mbvh_traverse.h"
+#include "traversal/ray_order.h"
 #include "workloads/hard_cases.h"
 #include "test_geometry.h"
 #include "test_util.h"
@@ -764,6 +765,32 @@ TEST(MBVH, StreamSortKeepsEveryRaysDistance) {
           }
         }
       }
+    }
+  }
+}
+
+// The sorted streams do not depend on the thread count: a multi-threaded trace orders the whole
+// batch once (Traverser::batch_order) and its chunks are the single-threaded trace's streams, so
+// every hit is the same bit for bit, the reported triangle and barycentrics included.
+TEST(MBVH, StreamSortIsTheSameOnAnyThreadCount) {
+  Bench& bench = room_bench();
+  SchemeConfig cfg;
+  cfg.params = {{"stream", "64"}};
+  auto t = make_scheme("mbvh_rs", cfg);
+  t->prepare(bench.scene(), bench.cache());
+  RayOrder order;
+  for (const char* w : {"bounce:2", "bounce:3"}) {
+    const RayBatch& b = bench.rays(test::small_spec(w, 96));
+    ASSERT_TRUE(t->batch_order(b, order)) << w << ": the test needs a batch that is sorted";
+    std::vector<Hit> one(b.size());
+    trace_batch(*t, b, one, 1);
+    for (int threads : {2, 3}) {
+      std::vector<Hit> many(b.size());
+      trace_batch(*t, b, many, threads);
+      size_t differ = 0;
+      for (size_t i = 0; i < b.size(); ++i)
+        differ += one[i].t != many[i].t || one[i].prim != many[i].prim || one[i].u != many[i].u || one[i].v != many[i].v;
+      EXPECT_EQ(differ, 0u) << w << ", " << threads << " threads";
     }
   }
 }

@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <random>
 
+#include "harness/trace_runner.h"
 #include "traversal/probe.h"
 #include "traversal/ray_order.h"
 
@@ -102,6 +104,59 @@ TEST(RayOrder, EmptyAndSingleRanges) {
   o.sort(rays, 4, 5, 0.0, p);
   EXPECT_FALSE(o.moved());
   EXPECT_EQ(o.index(0), 4u);
+}
+
+// A scheme that asks for its batches in the origin order (Traverser::batch_order) and reports what
+// it was handed: each hit carries its ray's origin (t = x, u = y) and the position the ray had in
+// the batch given to trace (prim); calls on a batch not in its order are counted.
+class OrderingTraverser final : public Traverser {
+ public:
+  std::string_view name() const override { return "ordering"; }
+  void prepare(const Scene&, StructureCache&) override {}
+  void trace(const RayBatch& b, PacketRange r, std::span<Hit> h) const override {
+    if (!b.ordered) unordered_calls++;
+    for (uint32_t i = b.packet_begin[r.first]; i < b.packet_begin[r.last]; ++i)
+      h[i] = Hit{b.rays[i].org.x, i, b.rays[i].org.y, 0.f};
+  }
+  void trace(const RayBatch& b, PacketRange r, std::span<Hit> h, Probe&) const override { trace(b, r, h); }
+  bool batch_order(const RayBatch& b, RayOrder& o) const override {
+    NullProbe p;
+    o.sort(b.rays, 0, uint32_t(b.size()), 0.0, p);
+    return o.moved();
+  }
+  mutable std::atomic<int> unordered_calls{0};
+};
+
+// trace_batch with threads: the whole batch is ordered once, every call sees the gathered batch
+// (ordered), and each hit lands on its own ray; one thread hands the scheme the batch as it is.
+TEST(RayOrder, MultiThreadedTraceOrdersTheWholeBatchAndScattersTheHits) {
+  RayBatch b;
+  b.rays = random_rays(5003, 6);
+  b.group_uniform(64);
+  RayOrder expect;
+  NullProbe p;
+  expect.sort(b.rays, 0, uint32_t(b.size()), 0.0, p);
+  ASSERT_TRUE(expect.moved());
+  std::vector<uint32_t> position(b.size());
+  for (uint32_t j = 0; j < b.size(); ++j) position[expect.index(j)] = j;
+  for (int threads : {2, 3}) {
+    for (int rep = 0; rep < 2; ++rep) {  // the second trace reuses the thread's gathered batch
+      OrderingTraverser t;
+      std::vector<Hit> hits(b.size());
+      trace_batch(t, b, hits, threads);
+      EXPECT_EQ(t.unordered_calls.load(), 0) << threads;
+      for (uint32_t i = 0; i < b.size(); ++i) {
+        ASSERT_EQ(hits[i].t, b.rays[i].org.x) << "ray " << i << ", " << threads << " threads";
+        ASSERT_EQ(hits[i].u, b.rays[i].org.y) << "ray " << i;
+        ASSERT_EQ(hits[i].prim, position[i]) << "ray " << i << " was not traced at its place in the order";
+      }
+    }
+  }
+  OrderingTraverser one;
+  std::vector<Hit> hits(b.size());
+  trace_batch(one, b, hits, 1);
+  EXPECT_EQ(one.unordered_calls.load(), 1);
+  for (uint32_t i = 0; i < b.size(); ++i) ASSERT_EQ(hits[i].prim, i);
 }
 
 }  // namespace

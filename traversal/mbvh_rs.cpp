@@ -61,12 +61,11 @@ constexpr int kDefaultWidth = 8;
 enum class Sort { auto_, origin, none };
 Sort sort_of(const std::string& v) { return v == "auto" ? Sort::auto_ : v == "origin" ? Sort::origin : Sort::none; }
 constexpr double kMinChange = 0.5;
-// The fewest streams' worth of rays in a call that sort=auto sorts: the order pays only by
-// regrouping rays among streams. At one or two streams it cost 2-4% (two-thread runs, whose
-// chunks hold about one stream, sponza and sibenik_lucy; buddha's 17939 bounce:2 rays).
+// The fewest streams' worth of rays in a batch (or call) that sort=auto sorts: the order pays only
+// by regrouping rays among streams. At one or two streams it cost 2-4% (two-thread chunks of about
+// one stream each, sorted on their own before batch_order, sponza and sibenik_lucy; buddha's
+// 17939 bounce:2 rays).
 constexpr uint32_t kMinSortedStreams = 4;
-// Rays fetched ahead by the sorted path's gather of the rays and scatter of the hits.
-constexpr uint32_t kAhead = 48;
 // Rays per stream: see the header comment.
 constexpr int kDefaultStream = 8192;
 // 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
@@ -85,6 +84,18 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
   // A stream is formed from the rays of one call: multi-threaded runs hand out chunks of 16
   // packets unless asked for more, which would cut every stream to about a thousand rays.
   uint32_t preferred_chunk_rays() const override { return uint32_t(stream_); }
+  // A multi-threaded trace (harness/trace_runner.h's trace_batch) asks for the whole batch's order
+  // once and hands its threads chunks of about one stream (preferred_chunk_rays) of the batch
+  // gathered into it, so the streams are those a single-threaded trace sorts the batch into: the
+  // order is the same for any thread count. (Sorting each thread's chunk on its own regrouped
+  // nothing: a chunk is one stream.)
+  bool batch_order(const RayBatch& batch, RayOrder& order) const override {
+    const uint32_t n = uint32_t(batch.size());
+    if (!sorts(batch, n)) return false;
+    NullProbe p;
+    order.sort(batch.rays, 0, n, sort_ == Sort::auto_ ? kMinChange : 0.0, p);
+    return order.moved();
+  }
 
   template <class P>
   void run(const RayBatch& batch, PacketRange range, std::span<Hit> hits, P& probe) const {
@@ -125,8 +136,7 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
     if (s.rec.size() < (S + 7) / 8 * 8) s.rec.resize((S + 7) / 8 * 8);
     s.st.reserve(N, d.mbvh->stats.max_depth + 1, S);
 
-    // (A batch whose rays share one origin, camera rays, has nothing to sort.)
-    if (!(sort_ != Sort::none && !batch.common_origin && trace_sorted<N, K>(d, batch, range, hits, S, s, probe))) {
+    if (!trace_sorted<N, K>(d, batch, range, hits, S, s, probe)) {
       uint32_t begin = batch.packet_begin[range.first], end = begin;
       auto stream = [&](uint32_t from, uint32_t to) {
         trace_stream<N, K>(d, &batch.rays[from], to - from, &hits[from], s, probe);
@@ -150,39 +160,35 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 
   // sort=origin (and auto): streams of S consecutive rays in the order of their origins (packets
   // ignored: the order groups the rays that start near each other, wherever their pixels were).
-  // The rays are gathered into that order first and the hits scattered back last, each in a loop
-  // of its own that fetches kAhead rays ahead: the batch is mostly out of the caches by then, and
-  // reading it ray by ray inside the streams cost 5-17% more (sponza, crytek, conference
-  // bounce:3). (The prefetches sit in the loops themselves: GCC deletes a prefetch-only helper
-  // that it does not inline, mbvh_traverse.h's enter_branching.) False, having traced nothing,
-  // when the order keeps the batch's own (sort=auto and fewer than kMinSortedStreams streams or a
-  // coherent batch; every ray in one cell). The scratch grows by 53 bytes a ray of the call.
+  // The rays are gathered into that order first and the hits scattered back last (ray_order.h's
+  // gather_rays and scatter_hits: loops of their own that fetch ahead). False, having traced
+  // nothing, when the call is not to be sorted (`sorts`) or the order keeps the batch's own (a
+  // coherent batch under sort=auto; every ray in one cell). The scratch grows by 53 bytes a ray
+  // of the call.
   template <int N, TriKernel K, class P>
   bool trace_sorted(const MBVHData<N, 4>& d, const RayBatch& batch, PacketRange range, std::span<Hit> hits,
                     uint32_t S, Scratch& s, P& probe) const {
     const uint32_t first = batch.packet_begin[range.first], n = batch.packet_begin[range.last] - first;
-    if (sort_ == Sort::auto_ && n < kMinSortedStreams * S) return false;
+    if (!sorts(batch, n)) return false;
     s.order.sort(batch.rays, first, first + n, sort_ == Sort::auto_ ? kMinChange : 0.0, probe);
     if (!s.order.moved()) return false;
     s.rays.resize(n);
     s.hits.resize(n);
-    for (uint32_t j = 0; j < n; ++j) {
-      if (j + kAhead < n) __builtin_prefetch(&batch.rays[s.order.index(j + kAhead)], 0);
-      const Ray& r = batch.rays[s.order.index(j)];
-      s.rays[j] = r;
-      probe.read(&r, sizeof(Ray));
-      probe.write(&s.rays[j], sizeof(Ray));
-    }
+    gather_rays(s.order, batch.rays, 0, n, s.rays.data(), probe);
     for (uint32_t b = 0; b < n; b += S)
       trace_stream<N, K>(d, s.rays.data() + b, std::min(S, n - b), s.hits.data() + b, s, probe);
-    for (uint32_t j = 0; j < n; ++j) {
-      if (j + kAhead < n) __builtin_prefetch(&hits[s.order.index(j + kAhead)], 1);
-      Hit& h = hits[s.order.index(j)];
-      h = s.hits[j];
-      probe.read(&s.hits[j], sizeof(Hit));
-      probe.write(&h, sizeof(Hit));
-    }
+    scatter_hits(s.order, s.hits.data(), 0, n, hits, probe);
     return true;
+  }
+
+  // Whether a call of n rays of `batch` may be sorted (RayOrder::sort then decides whether the
+  // rays are coherent already): not under sort=none, not a batch whose rays share one origin
+  // (camera rays: nothing to sort), not one already in a scheme's order (RayBatch::ordered: the
+  // chunks of a multi-threaded trace, batch_order), and under sort=auto only a call of
+  // kMinSortedStreams streams or more.
+  bool sorts(const RayBatch& batch, uint32_t n) const {
+    return sort_ != Sort::none && !batch.common_origin && !batch.ordered &&
+           !(sort_ == Sort::auto_ && uint64_t(n) < uint64_t(kMinSortedStreams) * uint64_t(stream_));
   }
 
   // Algorithm 2.9 on the n rays at `rays`, their hits to `out`.

@@ -49,13 +49,15 @@ class RayOrder {
   // False when the order is the rays' own: every ray fell into one cell, or the batch was found
   // coherent under min_change (index(j) is then first + j).
   bool moved() const { return moved_; }
+  // The rays of the last sort: last - first.
+  uint32_t size() const { return size_; }
 
  private:
   static constexpr int kBitsPerAxis = 2;
   static constexpr uint32_t kCells = 1u << (3 * kBitsPerAxis);
   static constexpr uint32_t kProbe = 4096;  // rays whose cells decide whether the batch is coherent
 
-  uint32_t first_ = 0;
+  uint32_t first_ = 0, size_ = 0;
   bool moved_ = false;
   std::vector<uint32_t> index_;
   std::vector<uint8_t> key_;
@@ -65,6 +67,7 @@ template <class P>
 void RayOrder::sort(std::span<const Ray> rays, uint32_t first, uint32_t last, double min_change, P& probe) {
   const uint32_t n = last - first;
   first_ = first;
+  size_ = n;
   moved_ = false;
   if (n == 0) return;
   const Ray* in = rays.data() + first;
@@ -125,6 +128,39 @@ void RayOrder::sort(std::span<const Ray> rays, uint32_t first, uint32_t last, do
     probe.write(&to, sizeof(uint32_t));
   }
   moved_ = true;
+}
+
+// Rays fetched ahead by gather_rays and scatter_hits.
+inline constexpr uint32_t kOrderAhead = 48;
+
+// out[j - from] = rays[order.index(j)] for the positions j in [from, to) of the order: the rays
+// gathered into it in a loop of their own, fetching kOrderAhead rays ahead. The batch is mostly
+// out of the caches by the time it is read through the order, and reading it ray by ray inside a
+// stream's copy loop instead cost 5-17% (mbvh_rs on sponza, crytek, conference bounce:3;
+// docs/PERFORMANCE.md, "Session 36"). (The prefetch sits in the loop itself: GCC deletes a
+// prefetch-only helper that it does not inline, traversal/mbvh_traverse.h's enter_branching.)
+template <class P>
+void gather_rays(const RayOrder& order, std::span<const Ray> rays, uint32_t from, uint32_t to, Ray* out, P& probe) {
+  for (uint32_t j = from; j < to; ++j) {
+    if (j + kOrderAhead < to) __builtin_prefetch(&rays[order.index(j + kOrderAhead)], 0);
+    const Ray& r = rays[order.index(j)];
+    out[j - from] = r;
+    probe.read(&r, sizeof(Ray));
+    probe.write(&out[j - from], sizeof(Ray));
+  }
+}
+
+// hits[order.index(j)] = in[j - from] for the positions j in [from, to): the hits of gathered rays
+// written back to the rays' own places, fetching ahead as gather_rays does.
+template <class P>
+void scatter_hits(const RayOrder& order, const Hit* in, uint32_t from, uint32_t to, std::span<Hit> hits, P& probe) {
+  for (uint32_t j = from; j < to; ++j) {
+    if (j + kOrderAhead < to) __builtin_prefetch(&hits[order.index(j + kOrderAhead)], 1);
+    Hit& h = hits[order.index(j)];
+    h = in[j - from];
+    probe.read(&in[j - from], sizeof(Hit));
+    probe.write(&h, sizeof(Hit));
+  }
 }
 
 }  // namespace tb

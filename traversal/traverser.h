@@ -23,6 +23,8 @@
 
 namespace tb {
 
+class RayOrder;  // traversal/ray_order.h
+
 // Per-scheme options: the triangle kernel (--kernel) and parameters (--param k=v), e.g.
 // `leaf_size=4`, `stream=512`, `queue=384`. As the user gives them, `params` holds text;
 // make_scheme (traversal/registry.h) checks every key and value against the scheme's declared
@@ -83,6 +85,15 @@ class Traverser {
   // by region need many rays per call); multi-threaded runs hand out chunks of at least this size
   // while keeping every thread busy. 0: any chunk size is fine.
   virtual uint32_t preferred_chunk_rays() const { return 0; }
+  // The order a scheme traces `batch`'s rays in when it reorders a batch before forming its work
+  // (mbvh_rs's sort of incoherent rays by origin, traversal/ray_order.h), for multi-threaded
+  // traces: harness/trace_runner.h's trace_batch asks once per batch, inside the timed trace,
+  // gathers the rays into that order (a batch with `ordered` set, which the scheme does not
+  // reorder again), hands the threads chunks of it and scatters the hits back; so the order does
+  // not depend on how the batch is cut among threads. False (the default): the batch's own order,
+  // or the scheme orders within each call. A single-threaded trace makes one call, in which a
+  // scheme may order the whole batch itself.
+  virtual bool batch_order(const RayBatch& batch, RayOrder& order) const { return false; }
 };
 
 // Implements both trace entry points with one template: Derived provides

@@ -36,6 +36,9 @@ struct RayBatch {
   std::vector<uint32_t> packet_begin{0};
   uint32_t packet_size = 256;
   bool common_origin = false;  // every ray starts at one point (primary, divergence:D, rnd)
+  // The rays are in the order a scheme asked to trace them in (Traverser::batch_order): a
+  // multi-threaded trace's copy of a batch, which the scheme must not reorder again.
+  bool ordered = false;
   uint32_t depth = 0;          // 0 = primary, k = k-th bounce (for statistics by depth)
   std::string workload;
   // Camera workloads (primary, divergence, bounce, shadow): the pixel y * width + x whose path each
