@@ -313,6 +313,21 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 100.0));
   compare->add_option("--csv", compare_csv, "also write the comparison as CSV")->check(kOutputFile);
 
+  // A first word that is no subcommand is named as such (CLI11 would say only that a subcommand
+  // is required).
+  if (argc > 1 && argv[1][0] != '-') {
+    std::string names;
+    bool known = false;
+    for (const CLI::App* sub : app.get_subcommands({})) {
+      names += (names.empty() ? "" : ", ") + sub->get_name();
+      known |= sub->get_name() == argv[1];
+    }
+    if (!known) {
+      std::fprintf(stderr, "travbench: error: unknown subcommand '%s' (one of: %s; see travbench --help)\n", argv[1],
+                   names.c_str());
+      return 2;
+    }
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -201,6 +201,33 @@ double speed(const CsvTable& t, size_t row, const std::string& text, const std::
                    (no_rays ? ", or 0 for a cell without rays)" : ")"));
 }
 
+std::string shown(double v);
+
+// A row's rays count, where it has the column: a whole number >= 0 (a negative or fractional
+// count is a damaged row, and "0" is what marks a cell without rays for `speed`).
+void check_rays(const CsvTable& t, size_t row) {
+  const int col = t.column("rays");
+  if (col < 0) return;
+  const std::string& s = t.at(row, col);
+  const std::optional<double> v = parse_number(s);
+  if (!v || !(*v >= 0) || std::floor(*v) != *v)
+    throw InputError(where(t, row) + ": rays: '" + s + "' is not a ray count (a whole number >= 0)");
+}
+
+// The samples are the repetitions the row's median was taken of: a median that is not theirs (to
+// the 6 digits a CSV carries) is a damaged or edited row, and the U test would run on numbers the
+// row does not report.
+void check_samples_median(const CsvTable& t, size_t row, const std::vector<double>& samples, double median) {
+  if (samples.empty()) return;
+  std::vector<double> v = samples;
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  const double m = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  if (!(std::fabs(m - median) <= 1e-4 * std::max(std::fabs(m), std::fabs(median))))
+    throw InputError(where(t, row) + ": mrays_median " + shown(median) + " is not the median of its mrays_samples (" +
+                     shown(m) + ")");
+}
+
 // The ';'-separated repetitions of mrays_samples; an empty field means the row has none.
 std::vector<double> parse_samples(const CsvTable& t, size_t row, int col) {
   const std::string& s = t.at(row, col);
@@ -291,12 +318,16 @@ CompareResult compare_runs(const CsvTable& base, const CsvTable& next, const Com
     CellComparison c;
     c.key = key;
     c.id = bi.id.at(key);
+    check_rays(base, br);
+    check_rays(next, nr);
     c.base = speed(base, br, base.at(br, base.column("mrays_median")), "mrays_median");
     c.next = speed(next, nr, next.at(nr, next.column("mrays_median")), "mrays_median");
     c.ratio = c.base > 0 ? c.next / c.base : 0;
     const int bs = base.column("mrays_samples"), ns = next.column("mrays_samples");
     if (bs >= 0 && ns >= 0) {
       const auto a = parse_samples(base, br, bs), b = parse_samples(next, nr, ns);
+      check_samples_median(base, br, a, c.base);
+      check_samples_median(next, nr, b, c.next);
       c.base_samples = a.size();
       c.next_samples = b.size();
       c.p = mann_whitney_p(b, a);

@@ -112,8 +112,11 @@ CostImage cost_image(Bench& bench, const ImageOptions& opt) {
   check_image_options(opt);
   WorkloadSpec spec = parse_workload(opt.workload);
   spec.width = opt.width, spec.height = opt.height, spec.view = opt.view, spec.seed = opt.seed;
+  // By kind, not by the batch alone: a batch of no rays (a hard case on a scene it finds nothing
+  // in, or every path gone) has as many pixels as rays.
+  const bool camera = spec.kind == "primary" || spec.kind == "divergence" || spec.kind == "bounce" || spec.kind == "shadow";
   RayBatch batch = bench.rays(spec);
-  if (batch.pixel.size() != batch.size())
+  if (!camera || batch.pixel.size() != batch.size())
     throw InputError("--workload " + spec.name() +
                      ": its rays do not come from camera pixels (use primary, divergence:D, bounce:k or shadow)");
   if (opt.packet > 0) batch.group_uniform(opt.packet);

@@ -1,7 +1,8 @@
 #include "structures/builtin_scenes.h"
 
+#include <charconv>
 #include <cmath>
-#include <cstdio>
+#include <system_error>
 #include <numbers>
 #include <random>
 
@@ -221,10 +222,17 @@ std::string strip_offset(const std::string& arg, Vec3* off = nullptr) {
   const auto at = arg.rfind('@');
   if (at == std::string::npos) return arg;
   Vec3 o;
-  int used = 0;
-  const std::string spec = arg.substr(at + 1);  // all of it: trailing text was ignored
-  if (std::sscanf(spec.c_str(), "%f,%f,%f%n", &o.x, &o.y, &o.z, &used) != 3 || size_t(used) != spec.size() ||
-      !is_finite(o) || !in_coord_range(o))
+  // Three decimal numbers and nothing else, parsed by std::from_chars: no whitespace, no hex
+  // floats (sscanf's %f took both, where the OBJ loader refuses them), no trailing text.
+  const std::string spec = arg.substr(at + 1);
+  const char *p = spec.data(), *end = spec.data() + spec.size();
+  bool ok = true;
+  for (int a = 0; a < 3 && ok; ++a) {
+    const auto r = std::from_chars(p, end, o[a], std::chars_format::general);
+    ok = r.ec == std::errc() && r.ptr != p && (a < 2 ? r.ptr < end && *r.ptr == ',' : r.ptr == end);
+    p = r.ptr + 1;
+  }
+  if (!ok || !is_finite(o) || !in_coord_range(o))
     throw InputError("scene '" + arg + "': expected NAME@dx,dy,dz for a translated scene (|d| <= 2^56)");
   if (off) *off = o;
   return arg.substr(0, at);
@@ -276,15 +284,9 @@ Scene load_scene(const std::string& arg) {
     // A translation so far that float spacing collapses every triangle to zero area traces an
     // empty scene, not the one named: refused rather than reported as misses. (Some collapsed
     // triangles are the point of the huge-offset hard case, sphere@1483760,...: kept.)
-    auto with_area = [&s] {
-      size_t n = 0;
-      for (uint32_t t = 0; t < s.num_triangles(); ++t)
-        n += cross(s.vertex(t, 1) - s.vertex(t, 0), s.vertex(t, 2) - s.vertex(t, 0)) != Vec3{};
-      return n;
-    };
-    const size_t had_area = with_area();
+    const size_t had_area = s.triangles_with_area();
     s.translate(off);
-    const size_t keeps_area = with_area();
+    const size_t keeps_area = s.triangles_with_area();
     if (had_area > 0 && keeps_area == 0)
       throw InputError("scene '" + arg + "': the translation collapses all " + std::to_string(had_area) +
                        " triangles to zero area in float (offset too large for the scene's size)");

@@ -16,13 +16,19 @@ std::string KDBuildParams::key() const {
   return buf;
 }
 
+int KDTree::auto_depth(uint32_t n) {
+  return std::min(kMaxDepth, int(8 + 1.3 * std::log2(std::max(1u, n))));
+}
+
+uint64_t KDTree::reference_cap(uint32_t n) { return uint64_t(std::max(1u, n)) * uint64_t(auto_depth(n)); }
+
 std::string KDStats::describe() const {
   char buf[320];
   std::snprintf(buf, sizeof buf,
                 "nodes=%u leaves=%u empty_leaves=%u refs=%llu refs_per_tri=%.2f max_leaf=%u max_depth=%u/%u "
-                "clipped=%u sah=%.2f build_ms=%.1f bytes=%zu",
+                "clipped=%u rebuilds=%u dup_cost=%g sah=%.2f build_ms=%.1f bytes=%zu",
                 nodes, leaves, empty_leaves, (unsigned long long)references, refs_per_triangle, max_leaf_size,
-                max_depth, depth_limit, clipped, sah_cost, build_ms, bytes);
+                max_depth, depth_limit, clipped, rebuilds, dup_cost, sah_cost, build_ms, bytes);
   return buf;
 }
 
@@ -91,16 +97,39 @@ class Builder {
     const uint32_t n = uint32_t(scene_.num_triangles());
     if (n >= kMaxTriangles) throw InputError("kD-tree: too many triangles (limit 2^28)");
     tree_.bounds = n ? scene_.bounds() : AABB{{0, 0, 0}, {0, 0, 0}};
-    depth_limit_ = p_.max_depth > 0 ? std::min(p_.max_depth, KDTree::kMaxDepth)
-                                    : std::min(KDTree::kMaxDepth, int(8 + 1.3 * std::log2(std::max(1u, n))));
+    root_area_ = half_area(tree_.bounds.extent());
+    depth_limit_ = p_.max_depth > 0 ? std::min(p_.max_depth, KDTree::kMaxDepth) : KDTree::auto_depth(n);
     tree_.stats.depth_limit = uint32_t(depth_limit_);
-    std::vector<Event> events;
-    events.reserve(size_t(6) * n);
-    for (uint32_t i = 0; i < n; ++i) push_events(events, scene_.triangle_bounds(i), i);
-    std::sort(events.begin(), events.end());
-    tree_.nodes.reserve(size_t(4) * n + 1);
-    tree_.nodes.push_back(KDNode::leaf(0, 0));
-    recurse(0, tree_.bounds, events, n, 0);
+    ref_cap_ = KDTree::reference_cap(n);
+    // The SAH alone does not bound duplication: on a plane of overlapping triangles it pays to cut
+    // along every edge of their arrangement, with nearly all references on both sides, and
+    // max_leaf forces such splits on down to the depth limit. So the reference count is capped
+    // (KDTree::reference_cap). A build that would exceed the cap is abandoned and redone with a
+    // price per duplicated reference, the Lagrange multiplier of "least SAH cost with at most cap
+    // references": a split must lower the tree's SAH cost (area-weighted) by more than
+    // dup_cost_ times the references it adds. Plain SAH first (ordinary scenes stay far below
+    // the cap and build exactly once), then a price rising 4x per try, finally no duplication at
+    // all, which always fits. Each try stops once the cap is exceeded, so it visits at most
+    // depth_limit levels of at most cap references each: time and memory stay bounded.
+    const float unit = p_.cost_intersect / float(KDTree::auto_depth(n));  // SAH gain per reference at the cap
+    for (int attempt = 0;; ++attempt) {
+      dup_cost_ = attempt == 0 ? 0.f : attempt > kPricedTries ? INFINITY : unit * std::ldexp(1.f, 2 * attempt - 12);
+      tree_.nodes.clear();
+      tree_.prim_index.clear();
+      tree_.stats.max_depth = tree_.stats.clipped = 0;
+      std::vector<Event> events;
+      events.reserve(size_t(6) * n);
+      for (uint32_t i = 0; i < n; ++i) push_events(events, scene_.triangle_bounds(i), i);
+      std::sort(events.begin(), events.end());
+      if (attempt == 0) tree_.nodes.reserve(size_t(4) * n + 1);
+      tree_.nodes.push_back(KDNode::leaf(0, 0));
+      frontier_ = n;
+      over_ = false;
+      recurse(0, tree_.bounds, events, n, 0);
+      if (!over_) break;
+      ++tree_.stats.rebuilds;
+    }
+    tree_.stats.dup_cost = dup_cost_;
   }
 
  private:
@@ -178,7 +207,11 @@ class Builder {
     const bool forced = n > uint32_t(std::max(1, p_.max_leaf));
     // A split must separate something: both children as full as the parent is pure overhead.
     const bool progress = s.axis >= 0 && (s.n_left < n || s.n_right < n);
-    if (!progress || (s.cost >= leaf_cost && !forced)) {
+    // The price of duplication (run()); n_left + n_right bound the children's counts from above.
+    const uint32_t dup = s.n_left + s.n_right - std::min(n, s.n_left + s.n_right);
+    const bool worth = dup_cost_ == 0.f || dup == 0 ||
+                       half_area(cell.extent()) / root_area_ * (leaf_cost - s.cost) > dup_cost_ * float(dup);
+    if (!progress || (s.cost >= leaf_cost && !forced) || !worth) {
       make_leaf(node, ev);
       return;
     }
@@ -249,15 +282,28 @@ class Builder {
     tree_.nodes.push_back(KDNode::leaf(0, 0));
     tree_.nodes.push_back(KDNode::leaf(0, 0));
     tree_.nodes[node] = KDNode::interior(k, p, child);
+    // The leaves' references once every waiting node is a leaf: what this tree holds at least.
+    frontier_ += int64_t(nl) + nr - n;
+    if (frontier_ > int64_t(ref_cap_)) {
+      over_ = true;
+      return;
+    }
     recurse(child, cl, left, nl, depth + 1);
-    recurse(child + 1, cr, right, nr, depth + 1);
+    if (!over_) recurse(child + 1, cr, right, nr, depth + 1);
   }
+
+  static constexpr int kPricedTries = 10;  // dup_cost_ from unit / 1024 to unit * 256
 
   const Scene& scene_;
   const KDBuildParams& p_;
   KDTree& tree_;
   std::vector<uint8_t> side_;
   int depth_limit_ = 0;
+  float root_area_ = 0;
+  uint64_t ref_cap_ = 0;
+  int64_t frontier_ = 0;
+  bool over_ = false;
+  float dup_cost_ = 0;
 };
 
 }  // namespace

@@ -72,12 +72,13 @@ struct KDBuildParams {
   float cost_intersect = 20.f;
   // Hurley et al. 2002: a split that cuts off empty space costs (1 - empty_bonus) times as much.
   float empty_bonus = 0.2f;
-  // 0: automatic, 8 + 1.3 log2(N) (Havran's / pbrt's rule), capped at kMaxDepth.
+  // 0: automatic, KDTree::auto_depth: 8 + 1.3 log2(N) (Havran's / pbrt's rule), capped at kMaxDepth.
   int max_depth = 0;
   // Nodes with at most min_leaf triangles become leaves without evaluating splits.
   int min_leaf = 1;
   // Nodes with more than max_leaf triangles are split with the best SAH plane even when the SAH
-  // says a leaf is cheaper (as long as the split separates something and depth allows).
+  // says a leaf is cheaper (as long as the split separates something and depth and the
+  // reference cap allow).
   int max_leaf = 64;
   // Triangles lying in a split plane: referenced only by the side the SAH prefers (false, Wald &
   // Havran 2006; also enables flat cells that peel such triangles off a cell face), or by both
@@ -92,6 +93,8 @@ struct KDStats {
   uint32_t triangles = 0;
   uint32_t max_leaf_size = 0;
   uint32_t clipped = 0;         // straddling triangles clipped (perfect splits)
+  uint32_t rebuilds = 0;        // builds abandoned at the reference cap (KDTree::reference_cap)
+  float dup_cost = 0;           // the price per duplicated reference of the final build (0: plain SAH)
   double refs_per_triangle = 0; // references / triangles
   double sah_cost = 0, build_ms = 0;
   size_t bytes = 0;             // nodes + reference indices
@@ -107,6 +110,12 @@ struct KDTree {
   KDStats stats;
 
   static KDTree build(const Scene& scene, const KDBuildParams& params = {});
+  // The automatic depth limit, 8 + 1.3 log2 N (Havran's / pbrt's rule), at most kMaxDepth.
+  static int auto_depth(uint32_t n);
+  // The most references a tree over n triangles holds, whatever the input and parameters:
+  // n * auto_depth(n), O(N log N) (ordinary scenes use 2-6 per triangle). It bounds the build's
+  // memory and, with the depth limit, its time.
+  static uint64_t reference_cap(uint32_t n);
   // SAH cost of the built tree with the given cost parameters (expected cost per ray).
   double compute_sah_cost(const KDBuildParams& params) const;
   // Calls f(node_index, cell, depth) for every node, parents before children.

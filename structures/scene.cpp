@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 namespace tb {
 
@@ -37,6 +38,16 @@ void Scene::validate() const {
       if (i >= positions.size())
         throw InputError("scene '" + name + "': triangle " + std::to_string(t) + " uses vertex index " +
                          std::to_string(i) + " but there are " + std::to_string(positions.size()) + " vertices");
+  if (triangles_with_area() == 0)
+    throw InputError("scene '" + name + "': all " + std::to_string(triangles.size()) +
+                     " triangles are degenerate (zero area in float): nothing a ray can hit");
+}
+
+size_t Scene::triangles_with_area() const {
+  size_t n = 0;
+  for (uint32_t t = 0; t < num_triangles(); ++t)
+    n += max_abs(cross(vertex(t, 1) - vertex(t, 0), vertex(t, 2) - vertex(t, 0))) >= std::numeric_limits<float>::min();
+  return n;
 }
 
 uint64_t Scene::content_hash() const {

@@ -34,8 +34,13 @@ struct Scene {
   AABB bounds() const;
   AABB triangle_bounds(uint32_t tri) const;
   // Rejects NaN/Inf coordinates, coordinates outside the traceable range (vec3.h, kCoordLimit),
-  // out-of-range indices and empty scenes with an InputError.
+  // out-of-range indices, empty scenes and scenes whose every triangle is degenerate
+  // (triangles_with_area() == 0: every ray would miss) with an InputError.
   void validate() const;
+  // The triangles a ray can hit: a cross product of two edges in float with a component at least
+  // FLT_MIN (a denormal normal is zero to a tracing thread's flush-to-zero arithmetic, and so is
+  // every edge function of such a triangle).
+  size_t triangles_with_area() const;
   // Reads denormal coordinates as 0, as every tracing thread would (DAZ): a file's 1e-40 is
   // traced and checked against the exact reference as the same 0 (the file loaders call it).
   void flush_denormals();

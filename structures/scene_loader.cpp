@@ -141,7 +141,13 @@ std::vector<CameraView> views_from_scenes_json(const std::string& scene_path) {
       cv.name = "view" + std::to_string(i + 1);
       cv.eye = json_vec3(v["eye"], jp, vw + ": eye");
       cv.target = json_vec3(v["target"], jp, vw + ": target");
-      if (v.contains("up")) cv.up = json_vec3(v["up"], jp, vw + ": up");
+      if (v.contains("up")) {
+        cv.up = json_vec3(v["up"], jp, vw + ": up");
+        // A denormal component is zero to a tracing thread (flush-to-zero, as for the vertices:
+        // Scene::flush_denormals), so it is zero here too: an `up` of denormals is refused below.
+        for (int a = 0; a < 3; ++a)
+          if (is_denormal(cv.up[a])) cv.up[a] = 0.f;
+      }
       if (v.contains("vfov_deg")) {
         if (!v["vfov_deg"].is_number()) throw InputError(detail::error_line(jp, vw + ": vfov_deg must be a number"));
         cv.vfov_deg = v["vfov_deg"].get<float>();

@@ -180,6 +180,31 @@ TEST_F(BadInput, UnknownNamesAreOneLine) {
   expect_rejected("run --scene sphere@1,2,3,4" + csv, {"--scene", "sphere@1,2,3,4"});
   expect_rejected("run --scene sphere@1e16,1e16,1e16" + csv, {"--scene", "collapses all"});
   expect_rejected("run --scene sphere@1e17,0,0" + csv, {"--scene", "2^56"});
+  // The offset is three decimal numbers and nothing else: sscanf took whitespace and hex floats.
+  expect_rejected("run --scene 'sphere@ 1,2,3'" + csv, {"--scene"});
+  expect_rejected("run --scene sphere@0x10,0,0" + csv, {"--scene", "sphere@0x10,0,0"});
+  expect_rejected("run --scene sphere@1,+2,3" + csv, {"--scene"});
+  // A first word that is no subcommand is named; 'all' is not a scheme inside a list.
+  expect_rejected("warp_drive --scene sphere" + csv, {"unknown subcommand 'warp_drive'", "run"});
+  expect_rejected("run --scene sphere --schemes all,bvh_single" + csv, {"--schemes", "'all' stands alone"});
+}
+
+// A scene whose every triangle is degenerate traces nothing: refused when it loads (it ran every
+// cell with every ray a miss, and only rnd2 failed, after the other cells), in any format.
+TEST_F(BadInput, SceneOfOnlyDegenerateTrianglesIsRefused) {
+  const std::string tail = " --workload primary --width 16 --height 16 --out " + path("r.bin");
+  for (const auto& [name, text] : std::vector<std::pair<std::string, std::string>>{
+           {"point.obj", "v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\nf 1 2 3\n"},
+           {"line.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n"},
+           {"denormal.obj", "v 0 0 0\nv 1e-40 0 0\nv 0 1e-40 0\nf 1 2 3\n"},
+           {"line.off", "OFF\n3 1 0\n0 0 0\n1 1 1\n2 2 2\n3 0 1 2\n"}}) {
+    SCOPED_TRACE(name);
+    write(name, text);
+    expect_rejected("rays --scene " + path(name) + tail, {"--scene", name, "degenerate", "nothing a ray can hit"});
+  }
+  // One real triangle among them is a scene (DegenerateTrianglesAreKeptAndNeverHit).
+  write("one.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 2 2\nf 1 2 3\nf 4 4 4\n");
+  EXPECT_EQ(travbench("rays --scene " + path("one.obj") + tail).code, 0);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -403,6 +428,11 @@ TEST_F(BadInput, RayFilesAreRejectedWithFileAndReason) {
   bad_ray("hugeorg.bin", {{3e38f, 3e38f, 3e38f}, 0, {-1, -1, -1}, 3.4e38f}, "ray 1: org.x = 3e+38 is beyond");
   bad_ray("farorg.bin", {{0, -1e19f, 0}, 0, {0, 1, 0}, 3.4e38f}, "ray 1: org.y = -1e+19 is beyond");
   bad_ray("shortdir.bin", {{0, 0, 5}, 0, {1e-18f, 0, -1e-18f}, 1e30f}, "ray 1 has a direction shorter than 2^-56");
+  // A count whose size wraps 64 bits (2^59 rays of 32 bytes): the size it needs, not the wrapped one.
+  std::string huge = good;
+  const uint64_t count = uint64_t(1) << 59;
+  std::memcpy(huge.data() + 8, &count, 8);
+  expect_rays("hugecount.bin", huge, {"header says 576460752303423488 rays", "needs 18446744073709551"});
 }
 
 // ---------------------------------------------------------------------------------------------

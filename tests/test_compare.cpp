@@ -61,7 +61,7 @@ TEST(Compare, MatchesCellsAndGatesRegressions) {
       "room,bounce:2,bvh_single,watertight,5,5;5.1;4.9;5.2;4.8,0\n");
   const auto next = write_file("next.csv", head +
       "room,primary,bvh_single,watertight,8,8;8.1;7.9;8.2;7.8,2\n"          // 20% slower, significant
-      "room,primary,mbvh8_single,watertight,20.05,20.05;19.95;20.15;19.85;20.0,0\n"  // noise
+      "room,primary,mbvh8_single,watertight,20.05,20.05;19.95;20.15;19.85;20.1,0\n"  // noise
       "room,shadow,bvh_single,watertight,7,7;7;7;7;7,0\n");                 // unmatched
   CompareOptions opt;
   opt.fail_on_regression_pct = 5;
@@ -316,6 +316,11 @@ TEST(Compare, ValuesThatAreNotSpeedsOrAccuraciesNameFileRowAndColumn) {
       {"room,primary,bvh_single,4096,10,10;10.1;9.9,-0.5,0", {"mismatch_rate", "'-0.5'"}},
       {"room,primary,bvh_single,4096,10,10;10.1;9.9,1.5,0", {"mismatch_rate", "'1.5'"}},
       {"room,primary,bvh_single,4096,10,10;10.1;9.9,0,-1", {"false_miss", "'-1'"}},
+      // A ray count that is no count, and a median that is not its samples' (the U test ran on them).
+      {"room,primary,bvh_single,-1,10,10;10.1;9.9,0,0", {"rays", "'-1'", "whole number"}},
+      {"room,primary,bvh_single,40.5,10,10;10.1;9.9,0,0", {"rays", "'40.5'"}},
+      {"room,primary,bvh_single,4096,4.44,1e308;1e308;1e308,0,0", {"mrays_median 4.44", "not the median", "1e+308"}},
+      {"room,primary,bvh_single,4096,10,10;12;12,0,0", {"mrays_median 10", "not the median"}},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.row);

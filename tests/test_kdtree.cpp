@@ -339,6 +339,77 @@ TEST(KDTree, BuildsTwoHundredThousandTriangles) {
   check_kdtree(s, kd, /*full=*/false);
 }
 
+// n random triangles with corners uniform in the unit square of the plane y = 0: all coplanar,
+// about 150 overlapping at any point (the robustness audit's planar_sq input).
+Scene coplanar_overlapping(uint32_t n, uint32_t seed) {
+  Scene s;
+  s.name = "coplanar";
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(0.f, 1.f);
+  for (uint32_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) s.positions.push_back({U(rng), 0.f, U(rng)});
+    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
+  }
+  s.ensure_views();
+  return s;
+}
+
+// Long thin slivers in the plane z = 0: nested ones sharing an apex 1e-4 above a common base
+// line (the audit's slivers.obj) and random ones crossing the square, all overlapping.
+Scene overlapping_slivers(uint32_t n, uint32_t seed) {
+  Scene s;
+  s.name = "slivers";
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> U(-4.f, 4.f);
+  for (uint32_t i = 0; i < n; ++i) {
+    const float f = float(i / 2 + 1);
+    Vec3 a{-f, 0, 0}, b{f + 1, 0, 0}, c{0, 1e-4f, 0};
+    if (i % 2) {
+      a = {U(rng), U(rng), 0};
+      b = {U(rng), U(rng), 0};
+      c = (a + b) * 0.5f + Vec3{1e-3f, -1e-3f, 0};
+    }
+    s.positions.insert(s.positions.end(), {a, b, c});
+    s.triangles.push_back({3 * i, 3 * i + 1, 3 * i + 2});
+  }
+  s.ensure_views();
+  return s;
+}
+
+TEST(KDTree, ReferenceCapBoundsOverlappingFlatTriangles) {
+  // The SAH pays for cutting a plane of overlapping triangles along every edge of their
+  // arrangement with nearly all references on both sides, and max_leaf forces splits on to the
+  // depth limit: these builds took minutes and gigabytes. The reference cap (N * auto_depth(N),
+  // O(N log N)) holds for any parameters; the price on duplication keeps the tree useful.
+  for (uint32_t n : {1u, 12u, 1000u, 1u << 20})
+    EXPECT_EQ(KDTree::reference_cap(n), uint64_t(n) * uint64_t(KDTree::auto_depth(n)));
+  EXPECT_EQ(KDTree::auto_depth(1u << 20), 34);
+  const Scene s = coplanar_overlapping(3000, 3);
+  const KDTree kd = KDTree::build(s);
+  EXPECT_LE(kd.stats.references, KDTree::reference_cap(3000));
+  EXPECT_GT(kd.stats.rebuilds, 0u) << "the plain SAH build stays within the cap";
+  EXPECT_GT(kd.stats.dup_cost, 0.f);
+  EXPECT_GT(kd.stats.leaves, 8u) << "still subdivided";
+  EXPECT_LT(kd.stats.sah_cost, 0.5 * 20.0 * 3000) << "far cheaper than one leaf";
+  check_kdtree(s, kd);
+  const Scene sl = overlapping_slivers(600, 7);
+  KDBuildParams loose;  // the most permissive parameters in the documented ranges
+  loose.max_depth = 64;
+  loose.min_leaf = 0;
+  loose.max_leaf = 1;
+  loose.cost_traversal = 1e-6f;
+  loose.empty_bonus = 0.99f;
+  for (bool both : {false, true}) {
+    loose.planar_both = both;
+    const KDTree ks = KDTree::build(sl, loose);
+    EXPECT_LE(ks.stats.references, KDTree::reference_cap(600));
+    check_kdtree(sl, ks);
+  }
+  // Ordinary scenes never reach the cap: the plain SAH tree, built once.
+  const Scene r = random_triangles(3000, 21);
+  EXPECT_EQ(KDTree::build(r).stats.rebuilds, 0u);
+}
+
 // ---- traversal ------------------------------------------------------------------------------
 
 const std::vector<std::string> kKdSchemes = {"kd_single", "kd_packet"};
@@ -716,6 +787,57 @@ TEST(KDTraversal, ProbeCountsAgree) {
   EXPECT_EQ(c[0].leaf_ray_visits, c[1].leaf_ray_visits);
   EXPECT_EQ(c[0].tri_tests, c[1].tri_tests);
   EXPECT_LT(c[1].node_visits * 4, c[0].node_visits) << "packets share node visits";
+}
+
+TEST(KDTraversal, OverlappingFlatTrianglesAtTheReferenceCap) {
+  // The capped trees of ReferenceCapBoundsOverlappingFlatTriangles traced: rays from above at
+  // random points against a brute-force closest hit (point in any triangle: the plane at t = 1,
+  // else nothing; the exact reference is slow on 150 coplanar ties), random rays against the
+  // reference, and slivers with the most permissive parameters.
+  Bench bench(coplanar_overlapping(3000, 3));
+  const Scene& s = bench.scene();
+  std::mt19937 rng(31);
+  std::uniform_real_distribution<float> U(-0.05f, 1.05f);
+  RayBatch b;
+  std::vector<int> brute;  // 1: hits at t = 1, 0: misses, -1: within 1e-4 of an edge (skipped)
+  for (int i = 0; i < 1000; ++i) {
+    const double x = U(rng), z = U(rng);
+    int h = 0;
+    for (uint32_t t = 0; t < s.num_triangles() && h >= 0; ++t) {
+      double e[3], d = INFINITY;  // signed distances to the edge lines, distance to the edges
+      for (int j = 0; j < 3; ++j) {
+        const Vec3 p = s.vertex(t, j), q = s.vertex(t, (j + 1) % 3);
+        const double ex = double(q.x) - p.x, ez = double(q.z) - p.z, px = x - p.x, pz = z - p.z;
+        const double len2 = ex * ex + ez * ez, u = std::clamp((px * ex + pz * ez) / len2, 0.0, 1.0);
+        e[j] = (ex * pz - ez * px) / std::sqrt(len2);
+        d = std::min(d, std::hypot(px - u * ex, pz - u * ez));
+      }
+      if (d < 1e-4) h = -1;  // too close to an edge to call
+      else if ((e[0] > 0) == (e[1] > 0) && (e[1] > 0) == (e[2] > 0)) h = 1;
+    }
+    brute.push_back(h);
+    b.rays.push_back({{float(x), 1.f, float(z)}, 0.f, {0.f, -1.f, 0.f}, INFINITY});
+  }
+  b.group_uniform(256);
+  for (const auto& name : kKdSchemes) {
+    auto t = make_scheme(name);
+    t->prepare(bench.scene(), bench.cache());
+    const std::vector<Hit> hits = trace_with(*t, b);
+    uint64_t wrong = 0, checked = 0;
+    for (size_t i = 0; i < hits.size(); ++i) {
+      if (brute[i] < 0) continue;
+      ++checked;
+      wrong += brute[i] ? !(hits[i].hit() && std::fabs(hits[i].t - 1.f) < 1e-5f) : hits[i].hit();
+    }
+    EXPECT_GT(checked, 500u);
+    EXPECT_EQ(wrong, 0u) << name << " against brute force";
+  }
+  expect_matches_reference(bench, bench.rays(test::small_spec("rnd", 48)), "coplanar overlapping / rnd", 1);
+  Bench slivers(overlapping_slivers(600, 7));
+  SchemeConfig loose;
+  loose.params = {{"kd_max_depth", "64"}, {"kd_min_leaf", "0"}, {"kd_max_leaf", "1"}, {"kd_ct", "1e-6"}};
+  for (const char* w : {"rnd", "rnd2"})
+    expect_matches_reference(slivers, slivers.rays(test::small_spec(w, 48)), std::string("slivers / ") + w, 1, loose);
 }
 
 TEST(KDTraversal, EmptyAndTinyScenes) {

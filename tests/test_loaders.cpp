@@ -85,7 +85,9 @@ std::array<Vec3, 3> corners(const Scene& s, size_t t) {
   return {s.vertex(static_cast<uint32_t>(t), 0), s.vertex(static_cast<uint32_t>(t), 1), s.vertex(static_cast<uint32_t>(t), 2)};
 }
 
-// For meshes whose vertex k sits at x = k: the triangle as the x coordinates of its corners.
+// For meshes whose vertex k sits at x = k: the triangle as the x coordinates of its corners. (Such
+// meshes put vertex k at y = k^2, so that their triangles have area: a scene of only degenerate
+// triangles is refused.)
 std::vector<std::array<float, 3>> triangles_by_x(const Scene& s) {
   std::vector<std::array<float, 3>> out;
   for (size_t t = 0; t < s.num_triangles(); ++t) {
@@ -345,10 +347,10 @@ TEST_F(LoaderTest, ObjNegativeAndForwardIndices) {
 }
 
 TEST_F(LoaderTest, ObjUppercaseExtensionAndExponents) {
-  Scene s = tb::load_scene_file(write("CAPS.OBJ", "v +1e0 0 0\nv 2.5E+1 0 0\nv 0 1e-50 0\nf 1 2 3\n"));
+  Scene s = tb::load_scene_file(write("CAPS.OBJ", "v +1e0 0 0\nv 2.5E+1 0 0\nv 0 1 1e-50\nf 1 2 3\n"));
   ASSERT_EQ(s.num_triangles(), 1u);
   EXPECT_EQ(s.positions[1].x, 25.f);
-  EXPECT_EQ(s.positions[2].y, 0.f);  // below float range: rounds to zero instead of failing
+  EXPECT_EQ(s.positions[2].z, 0.f);  // below float range: rounds to zero instead of failing
 }
 
 TEST_F(LoaderTest, ObjBadInput) {
@@ -585,7 +587,7 @@ TEST_F(LoaderTest, GlbMatchesGltf) {
 
 TEST_F(LoaderTest, GltfIndexTypesStrideStripsAndFans) {
   Gltf g;
-  const int p4 = g.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}});
+  const int p4 = g.positions({{0, 0, 0}, {1, 1, 0}, {2, 4, 0}, {3, 9, 0}});
   const int i8 = g.indices<uint8_t>({0, 1, 2});
   const int i32 = g.indices<uint32_t>({3, 2, 1});
   // Interleaved position + normal, 24-byte stride, positions x = 10..12.
@@ -609,8 +611,8 @@ TEST_F(LoaderTest, GltfIndexTypesStrideStripsAndFans) {
 
 TEST_F(LoaderTest, GltfDefaultSceneAndNodelessMeshes) {
   Gltf g;
-  const int pa = g.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
-  const int pb = g.positions({{5, 0, 0}, {6, 0, 0}, {7, 0, 0}});
+  const int pa = g.positions({{0, 0, 0}, {1, 1, 0}, {2, 4, 0}});
+  const int pb = g.positions({{5, 25, 0}, {6, 36, 0}, {7, 49, 0}});
   const int ma = g.mesh({Gltf::prim(pa)});
   const int mb = g.mesh({Gltf::prim(pb)});
   g.node({{"mesh", ma}});
@@ -661,10 +663,10 @@ TEST_F(LoaderTest, GltfQuantizedAndBufferlessPositions) {
 // over zeros (no bufferView).
 TEST_F(LoaderTest, GltfSparseAccessors) {
   Gltf g;
-  const int base = g.positions({{0, 0, 0}, {1, 0, 0}, {2, 0, 0}});
+  const int base = g.positions({{0, 0, 0}, {1, 1, 0}, {2, 4, 0}});
   std::string idx, val;
   put<uint16_t>(idx, 2);
-  for (float v : {7.f, 0.f, 0.f}) put(val, v);
+  for (float v : {7.f, 49.f, 0.f}) put(val, v);
   const int iv = g.view(idx), vv = g.view(val);
   g.j["accessors"][base]["sparse"] = {{"count", 1},
                                       {"indices", {{"bufferView", iv}, {"componentType", 5123}}},
@@ -672,7 +674,7 @@ TEST_F(LoaderTest, GltfSparseAccessors) {
   std::string idx2, val2;
   put<uint8_t>(idx2, 1);
   put<uint8_t>(idx2, 2);
-  for (float v : {3.f, 0.f, 0.f, 4.f, 0.f, 0.f}) put(val2, v);
+  for (float v : {3.f, 9.f, 0.f, 4.f, 16.f, 0.f}) put(val2, v);
   const int iv2 = g.view(idx2), vv2 = g.view(val2);
   g.j["accessors"].push_back({{"componentType", 5126}, {"type", "VEC3"}, {"count", 3},
                               {"sparse", {{"count", 2},
@@ -924,16 +926,37 @@ TEST_F(LoaderTest, ScenesJsonListFormAndErrors) {
   write("wide/scenes.json",
         R"({"a": {"file": "a.obj", "views": [{"eye": [0, 0, 7e16], "target": [0, 0, -7e16], "up": [1e16, 0, 0]}]}})");
   EXPECT_EQ(tb::load_scene_file(wide).views.size(), 1u);
+
+  // A short `up` is the camera a unit one gives (the camera's absolute test took a fallback axis
+  // and turned the image by 90 degrees); an `up` of denormals is zero, as to a tracing thread.
+  auto primary_dirs = [&](const std::string& dir, const std::string& up) {
+    const std::string obj = write(dir + "/a.obj", tri);
+    write(dir + "/scenes.json", R"({"a": {"file": "a.obj", "views": [{"eye": [0.2, 0.2, -2], "target": [0.2, 0.2, 0], "up": )" +
+                                    up + "}]}}");
+    tb::WorkloadSpec spec = tb::parse_workload("primary");
+    spec.width = spec.height = 16;
+    std::vector<tb::Vec3> dirs;
+    for (const tb::Ray& r : tb::generate_workload(tb::load_scene_file(obj), spec, nullptr).rays) dirs.push_back(r.dir);
+    return dirs;
+  };
+  const std::vector<tb::Vec3> unit = primary_dirs("up1", "[0, 1, 0]");
+  EXPECT_EQ(primary_dirs("up1e-10", "[0, 1e-10, 0]"), unit);
+  EXPECT_EQ(primary_dirs("up1e-30", "[0, 1e-30, 0]"), unit);
+  EXPECT_EQ(primary_dirs("up1e6", "[0, 1e6, 0]"), unit);
+  const std::string denorm = write("updenorm/a.obj", tri);
+  write("updenorm/scenes.json",
+        R"({"a": {"file": "a.obj", "views": [{"eye": [0.2, 0.2, -2], "target": [0.2, 0.2, 0], "up": [0, 1e-40, 0]}]}})");
+  expect_input_error(denorm, "up is zero or parallel");
 }
 
-// Derived views of scenes without extent or near the edge of the traceable range: the eyes stay
-// off the centre and inside the range, so every workload's rays are valid (they were "ray 0 has a
-// NaN or Inf component" or "a zero direction" before).
-TEST_F(LoaderTest, DerivedViewsOfDegenerateAndFarScenesGiveValidRays) {
+// Derived views of scenes far thinner than their distance from the origin or near the edge of the
+// traceable range: the eyes stay off the centre and inside the range, so every workload's rays are
+// valid (they were "ray 0 has a NaN or Inf component" or "a zero direction" before). (A scene of
+// one point, which this test also loaded, is now refused: SceneOfOnlyDegenerateTrianglesIsRefused.)
+TEST_F(LoaderTest, DerivedViewsOfThinAndFarScenesGiveValidRays) {
   const std::vector<std::pair<std::string, std::string>> cases = {
-      {"point0.obj", "v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n"},
-      {"point5.obj", "v 5 5 5\nv 5 5 5\nv 5 5 5\nf 1 2 3\n"},
-      {"pointfar.obj", "v 1e16 -1e16 3e16\nv 1e16 -1e16 3e16\nv 1e16 -1e16 3e16\nf 1 2 3\n"},
+      {"tiny5.obj", "v 5 5 5\nv 5.00001 5 5\nv 5 5.00001 5\nf 1 2 3\n"},
+      {"tinyfar.obj", "v 1e16 -1e16 3e16\nv 1.000001e16 -1e16 3e16\nv 1e16 -0.999999e16 3e16\nf 1 2 3\n"},
       {"edge.obj", "v 7e16 7e16 7e16\nv 6e16 7e16 7e16\nv 7e16 6e16 7e16\nf 1 2 3\n"},
       {"denormal.obj", "v 1e-40 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"},
   };

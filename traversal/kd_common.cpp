@@ -11,7 +11,8 @@ ParamSpecs kd_param_specs() {
           int_param("kd_max_depth", p.max_depth, 0, KDTree::kMaxDepth, "tree depth limit (0: 8 + 1.3 log2 N)"),
           int_param("kd_min_leaf", p.min_leaf, 0, 1 << 20, "nodes with at most this many triangles become leaves"),
           int_param("kd_max_leaf", p.max_leaf, 1, 1 << 30,
-                    "nodes with more triangles are split even when the SAH prefers a leaf"),
+                    "nodes with more triangles are split even when the SAH prefers a leaf (within the depth limit and the "
+                    "reference cap, KDTree::reference_cap)"),
           bool_param("kd_planar_both", p.planar_both, "triangles in a split plane go to both children")};
 }
 

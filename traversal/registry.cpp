@@ -137,6 +137,7 @@ std::vector<std::string> expand_scheme_list(const std::string& list) {
   std::stringstream ss(list);
   for (std::string item; std::getline(ss, item, ',');) {
     if (item.empty()) continue;
+    if (item == "all") throw InputError("--schemes: 'all' stands alone (every scheme), not in a list ('" + list + "')");
     config_for(item, {});  // the name and the entry's own parameters
     out.push_back(item);
   }

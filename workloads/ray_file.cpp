@@ -1,5 +1,6 @@
 #include "workloads/ray_file.h"
 
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -76,11 +77,14 @@ RayBatch read_rays(const std::string& path) {
   read_exact(f, &count, 1, path, "the count");
   read_exact(f, &packet_size, 1, path, "the packet size");
   read_exact(f, &packet_count, 1, path, "the packet count");
-  const uint64_t expect = 24 + count * 32 + (packet_count ? (uint64_t(packet_count) + 1) * 4 : 0);
-  if (count > (size - 24) / 32 || expect != size)
+  // The size the header implies, in long double: 32 bytes a ray of a count near 2^64 would wrap.
+  const long double expect = 24.0L + 32.0L * (long double)count + (packet_count ? 4.0L * ((long double)packet_count + 1) : 0.0L);
+  if (count > (size - 24) / 32 || expect != (long double)size) {
+    char need[32];
+    std::snprintf(need, sizeof need, "%.0Lf", expect);
     throw InputError(path + ": header says " + std::to_string(count) + " rays and " + std::to_string(packet_count) +
-                     " packets, which needs " + std::to_string(expect) + " bytes, but the file has " +
-                     std::to_string(size));
+                     " packets, which needs " + need + " bytes, but the file has " + std::to_string(size));
+  }
   if (packet_size == 0) throw InputError(path + ": packet size is 0");
   RayBatch b;
   b.rays.resize(count);
