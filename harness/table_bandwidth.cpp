@@ -62,6 +62,10 @@ int bandwidth_table(const TableOptions& opt) {
     for (size_t s = 0; s < schemes.size(); ++s) {
       Record& r = records[s * workloads.size() + w];
       set_interleaved_speed(r, sec[s], sec[0], batch.size(), names[0]);
+      if (batch.size() == 0) {  // nothing traced: no reads or speed to print (the CSV says nan)
+        std::fprintf(stderr, "%-14s %-9s (no rays)\n", names[s].c_str(), workloads[w].c_str());
+        continue;
+      }
       std::fprintf(stderr, "%-14s %-9s %7s B/node  %10s node bytes  %8.2f memory reads/ray  %8.4g Mrays/s  %.3fx %s\n",
                    names[s].c_str(), workloads[w].c_str(), r.get("bytes_per_node")->c_str(),
                    r.get("node_bytes")->c_str(), std::stod(*r.get("mem_reads_per_ray")),

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 
@@ -41,6 +42,13 @@ void Scene::validate() const {
   if (triangles_with_area() == 0)
     throw InputError("scene '" + name + "': all " + std::to_string(triangles.size()) +
                      " triangles are degenerate (zero area in float): nothing a ray can hit");
+  if (const Vec3 e = bounds().extent(); std::max({e.x, e.y, e.z}) < kMinSceneExtent) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", double(std::max({e.x, e.y, e.z})));
+    throw InputError("scene '" + name + "' is " + buf +
+                     " across, below 2^-51 (4.4e-16), where the float kernels' products of coordinates "
+                     "underflow (scale the scene up)");
+  }
 }
 
 size_t Scene::triangles_with_area() const {

@@ -205,6 +205,12 @@ TEST_F(BadInput, SceneOfOnlyDegenerateTrianglesIsRefused) {
   // One real triangle among them is a scene (DegenerateTrianglesAreKeptAndNeverHit).
   write("one.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 2 2\nf 1 2 3\nf 4 4 4\n");
   EXPECT_EQ(travbench("rays --scene " + path("one.obj") + tail).code, 0);
+  // Triangles with area in float, but a scene too small for the kernels' products (vec3.h,
+  // kMinSceneExtent): every scheme gave false hits and misses on one 1e-18 across.
+  write("tiny.obj", "v 1e-18 1e-18 1e-18\nv 2e-18 1e-18 1e-18\nv 1e-18 2e-18 1e-18\nf 1 2 3\n");
+  expect_rejected("rays --scene " + path("tiny.obj") + tail, {"--scene", "tiny.obj", "below 2^-51"});
+  write("small.obj", "v 1e-12 1e-12 1e-12\nv 2e-12 1e-12 1e-12\nv 1e-12 2e-12 1e-12\nf 1 2 3\n");
+  EXPECT_EQ(travbench("rays --scene " + path("small.obj") + tail).code, 0);
 }
 
 // ---------------------------------------------------------------------------------------------
