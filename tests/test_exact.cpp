@@ -202,6 +202,32 @@ TEST(ExactOracle, EqualExactDistancesPickTheLowestPrimitive) {
   EXPECT_EQ(c.trace(ray({.75f, .25f, 2}, {0, 0, -1})).prim, 1u) << "duplicates: the lower id";
 }
 
+// A stack of overlapping triangles in one tilted plane (z = x holds exactly for any float x), seen
+// along random directions: their distances are equal exactly but not to the double filter, so
+// every tie goes to the exact comparison, which keeps the closest's exact distance between ties
+// (they cost 15 ms a ray when each tie formed both sides anew). The lowest id wins, as brute force says.
+TEST(ExactOracle, TiesInATiltedPlaneGoToTheLowestPrimitive) {
+  std::mt19937 g(11);
+  std::uniform_real_distribution<float> u(0.f, 1.f);
+  std::vector<Vec3> p;
+  std::vector<std::array<uint32_t, 3>> tris;
+  for (uint32_t k = 0; k < 60; ++k) {
+    for (int c = 0; c < 3; ++c) {
+      const float x = u(g) * 0.6f + (c == 1 ? 0.4f : 0.f), y = u(g) * 0.6f + (c == 2 ? 0.4f : 0.f);
+      p.push_back({x, y, x});
+    }
+    tris.push_back({3 * k, 3 * k + 1, 3 * k + 2});
+  }
+  const Checked c(mesh(p, tris));
+  size_t hits = 0;
+  for (int i = 0; i < 40; ++i) {
+    const float x = 0.35f + 0.3f * u(g), y = 0.35f + 0.3f * u(g);
+    const Vec3 d{u(g) - 0.5f, u(g) - 0.5f, -1.f - u(g)};
+    hits += c.trace(ray(Vec3{x, y, x} - d * 3.f, d)).hit();
+  }
+  EXPECT_GT(hits, 20u);
+}
+
 TEST(ExactOracle, LargeOffsetsKeepExactVertexAndEdgeHits) {
   for (Vec3 off : {Vec3{148376, 1234, -223423}, Vec3{1483760, 12340, -2234230}, Vec3{1e6f, 1e6f, 1e6f}}) {
     // Integer triangle at the offset: the vertices stay exact floats.

@@ -25,6 +25,7 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <optional>
 #include <vector>
 
 #include "structures/structure_cache.h"
@@ -175,25 +176,47 @@ bool tri_candidate(const Ray& ray, Vec3 A, Vec3 B, Vec3 C, Cand& cand) {
   return true;
 }
 
-// Exact T, D (D > 0) of a triangle known to be hit, for a comparison the filter left open.
+// Exact T, D (D > 0) of a triangle known to be hit, for a comparison the filter left open: with
+// N = (B - A) x (C - A), D = d . N and T = (A - o) . N (the same values as exact_tri's U + V + W and
+// det(a, b, c); one cross product and two dot products instead of exact_tri's four and four, and
+// no edge signs: the candidate's were decided already).
 void exact_td(const Ray& ray, Vec3 A, Vec3 B, Vec3 C, mpq_class& T, mpq_class& D) {
-  Ray open = ray;  // the interval was already checked; only T and D are wanted
-  open.tmin = -INFINITY, open.tmax = INFINITY;
-  exact_tri(open, A, B, C, T, D);
+  const Q3 n = qcross(qminus(B, A), qminus(C, A));
+  const Q3 d{mpq_class(double(ray.dir.x)), mpq_class(double(ray.dir.y)), mpq_class(double(ray.dir.z))};
+  D = qdot(d, n);
+  T = qdot(qminus(A, ray.org), n);
+  if (sgn(D) < 0) D = -D, T = -T;
 }
 void exact_td(const Ray& ray, const Scene& s, uint32_t prim, mpq_class& T, mpq_class& D) {
   exact_td(ray, s.vertex(prim, 0), s.vertex(prim, 1), s.vertex(prim, 2), T, D);
 }
 
-// Whether candidate x is closer than y: smaller exact t, or equal t and lower prim id.
-bool closer(const Ray& ray, const Scene& s, const Cand& x, const Cand& y) {
+// A candidate's exact T and D, formed the first time a comparison needs them and kept with the
+// candidate: the closest so far meets every later tie (a stack of coplanar, overlapping triangles
+// put ~150 ties on one ray, each of which formed both sides anew: 15 ms a ray).
+// (In an optional: most candidates never need them, and a rational's constructor allocates.)
+struct ExactTD {
+  struct Values {
+    mpq_class T, D;
+  };
+  std::optional<Values> v;
+  const Values& need(const Ray& ray, const Scene& s, uint32_t prim) {
+    if (!v) {
+      v.emplace();
+      exact_td(ray, s, prim, v->T, v->D);
+    }
+    return *v;
+  }
+};
+
+// Whether candidate x is closer than y: smaller exact t, or equal t and lower prim id. xe and ye
+// hold (or receive) their exact T, D where the filter cannot decide.
+bool closer(const Ray& ray, const Scene& s, const Cand& x, const Cand& y, ExactTD& xe, ExactTD& ye) {
   if (y.prim == kNoHit) return true;
   int c = sign(sub(mul(x.T, y.D), mul(y.T, x.D)));  // sign of t_x - t_y (both D > 0)
   if (c == kUnknown) {
-    mpq_class Tx, Dx, Ty, Dy;
-    exact_td(ray, s, x.prim, Tx, Dx);
-    exact_td(ray, s, y.prim, Ty, Dy);
-    const int q = cmp(Tx * Dy, Ty * Dx);
+    const ExactTD::Values &a = xe.need(ray, s, x.prim), &b = ye.need(ray, s, y.prim);
+    const int q = cmp(a.T * b.D, b.T * a.D);
     c = (q > 0) - (q < 0);
   }
   return c < 0 || (c == 0 && x.prim < y.prim);
@@ -324,10 +347,13 @@ void traverse(const BVH& bvh, const Scene& scene, const Ray& ray, double& tfar, 
 Hit ExactOracle::closest(const Ray& ray, uint64_t* tri_tests) const {
   if (!ray_valid(ray) || !(ray.tmin < ray.tmax)) return Hit{};
   Cand best;
+  ExactTD best_exact;
   double tfar = ray.tmax, lo;
   traverse(*bvh_, *scene_, ray, tfar, tri_tests, [&](const Cand& c) {
-    if (!closer(ray, *scene_, c, best)) return;
+    ExactTD c_exact;
+    if (!closer(ray, *scene_, c, best, c_exact, best_exact)) return;
     best = c;
+    best_exact = std::move(c_exact);
     t_bounds(best, lo, tfar);  // an equal exact t of a lower id must still be found: inclusive
     if (tfar > ray.tmax) tfar = ray.tmax;
   });
@@ -346,11 +372,13 @@ std::vector<Hit> ExactOracle::all_hits(const Ray& ray) const {
 Hit ExactOracle::closest_brute_force(const Ray& ray) const {
   if (!ray_valid(ray) || !(ray.tmin < ray.tmax)) return Hit{};
   Cand best;
+  ExactTD best_exact;
   for (uint32_t prim = 0; prim < scene_->num_triangles(); ++prim) {
     Cand c;
     if (!tri_candidate(ray, scene_->vertex(prim, 0), scene_->vertex(prim, 1), scene_->vertex(prim, 2), c)) continue;
     c.prim = prim;
-    if (closer(ray, *scene_, c, best)) best = c;
+    ExactTD c_exact;
+    if (closer(ray, *scene_, c, best, c_exact, best_exact)) best = c, best_exact = std::move(c_exact);
   }
   return finish_closest(ray, *scene_, best);
 }
