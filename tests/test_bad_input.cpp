@@ -189,6 +189,31 @@ TEST_F(BadInput, UnknownNamesAreOneLine) {
   expect_rejected("run --scene sphere --schemes all,bvh_single" + csv, {"--schemes", "'all' stands alone"});
 }
 
+// A parameter that changes nothing under the values of the others is refused, naming why (every
+// option works or is refused; found by an audit of every scheme's parameters, session 37).
+TEST_F(BadInput, ParametersThatChangeNothingAreRefused) {
+  const std::string run = "run --scene room --workloads primary --width 16 --height 16 --reps 1 --csv " + path("x.csv") +
+                          " --schemes ";
+  expect_rejected(run + "mbvh4_single:tri_cost=50", {"tri_cost", "collapse=greedy"});
+  expect_rejected(run + "mbvh_rs:width=4:prim_cost=20", {"prim_cost", "collapse=greedy"});
+  expect_rejected(run + "mbvh8_single:prim_share=0.5", {"prim_share", "prim_cost"});
+  expect_rejected(run + "mbvh8_single:tri_width=4:small=4", {"small", "tri_width=4"});
+  expect_rejected(run + "mbvh8_single:tri_width=4:order=sort", {"order", "tri_width=4"});
+  expect_rejected(run + "mbvh8_single:order=branching:prefetch=on", {"prefetch", "order=branching"});
+  expect_rejected(run + "mbvh8_single:prefetch=off:llc_mib=8", {"llc_mib", "prefetch=off"});
+  expect_rejected(run + "cwbvh_single:order=octant:prefetch=on", {"prefetch", "order=octant"});
+  expect_rejected(run + "bvh_ranged:subfrusta=0", {"subfrusta", "tricull"});
+  expect_rejected(run + "treelet_queue:small=4", {"small must be 0"});
+  expect_rejected("table pathtrace --scene room --threads 2 --csv " + path("p.csv"), {"--threads"});
+  // Where they act, the same values are taken.
+  for (const std::string ok : {"mbvh4_single:collapse=sah:tri_cost=50", "mbvh8_single:prim_cost=20:prim_share=0.5",
+                               "mbvh8_single:order=sort:prefetch=on", "bvh_ranged:tricull=1:subfrusta=0",
+                               "treelet_queue:tree=mbvh8:small=4"}) {
+    const CliResult r = travbench(run + ok);
+    EXPECT_EQ(r.code, 0) << ok << ": " << r.err;
+  }
+}
+
 // A scene whose every triangle is degenerate traces nothing: refused when it loads (it ran every
 // cell with every ray a miss, and only rnd2 failed, after the other cells), in any format.
 TEST_F(BadInput, SceneOfOnlyDegenerateTrianglesIsRefused) {

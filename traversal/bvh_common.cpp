@@ -43,27 +43,13 @@ BVHBuildParams bvh_params(const SchemeConfig& cfg) {
   // or is refused): a value other than its default (what the resolved config holds when the user
   // gave none). The split_* parameters steer the spatial-split build only; Embree's builder
   // (structures/embree_bvh.h) takes none of travbench's builder knobs but spatial and split_budget.
-  if (cfg.declared) {
-    const auto changed = [&](const char* key) {
-      const ParamSpec& spec = *find_param(*cfg.declared, key);
-      switch (spec.type) {
-        case ParamType::boolean: return cfg.get_bool(key) != param_to_bool(spec.fallback);
-        case ParamType::integer: return cfg.get_int(key) != param_to_int(spec.fallback);
-        default: return cfg.get_real(key) != param_to_real(spec.fallback);
-      }
-    };
-    if (!p.spatial)
-      for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"})
-        if (changed(key))
-          throw InputError(std::string("parameter '") + key +
-                           "' only applies to spatial-split builds, and this scheme builds without them (spatial=0): "
-                           "add --param spatial=1 or drop " + key);
-    if (p.builder == BVHBuilder::embree)
-      for (const char* key : {"bins", "split_alpha", "split_overlap", "split_wall", "split_walls"})
-        if (changed(key))
-          throw InputError(std::string("parameter '") + key +
-                           "' steers travbench's BVH builder, not Embree's (builder=embree): drop " + key);
-  }
+  if (!p.spatial)
+    for (const char* key : {"split_alpha", "split_overlap", "split_budget", "split_wall", "split_walls"})
+      cfg.refuse_if_changed(key, std::string("only applies to spatial-split builds, and this scheme builds without them "
+                                             "(spatial=0): add --param spatial=1 or drop ") + key);
+  if (p.builder == BVHBuilder::embree)
+    for (const char* key : {"bins", "split_alpha", "split_overlap", "split_wall", "split_walls"})
+      cfg.refuse_if_changed(key, std::string("steers travbench's BVH builder, not Embree's (builder=embree): drop ") + key);
   if (p.builder == BVHBuilder::embree && p.max_leaf > 32)
     throw InputError("leaf_size " + std::to_string(p.max_leaf) +
                      ": Embree's builder (builder=embree) makes leaves of at most 32 triangles");

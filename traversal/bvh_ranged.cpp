@@ -53,7 +53,10 @@ class BVHRanged final : public BVHPacketScheme<BVHRanged> {
   // The sub-frusta's split planes only cull triangles: without tricull they are not fitted.
   explicit BVHRanged(const SchemeConfig& cfg)
       : BVHPacketScheme(cfg, cfg.get_bool("subfrusta") && cfg.get_int("tricull") > 0),
-        tricull_(cfg.get_int("tricull")), leafmask_(cfg.get_bool("leafmask")), track_last_(cfg.get_bool("last")) {}
+        tricull_(cfg.get_int("tricull")), leafmask_(cfg.get_bool("leafmask")), track_last_(cfg.get_bool("last")) {
+    if (tricull_ == 0)
+      cfg.refuse_if_changed("subfrusta", "only culls leaf triangles, which tricull=0 does not: set tricull or drop subfrusta");
+  }
   std::string_view name() const override { return "bvh_ranged"; }
 
  private:

@@ -65,6 +65,9 @@ class CWBVHSingle final : public TraverserBase<CWBVHSingle> {
         full_percent_(cfg.get_int("full_top")),
         leaves_(cfg.get_choice("leaves") == "indexed" ? CWLeaves::indexed : CWLeaves::blocks) {
     check_cwbvh_params(params_);
+    check_prefetch_params(cfg, order_ == OrderParam::branching ? "order=branching"
+                               : order_ == OrderParam::octant  ? "order=octant"
+                                                               : nullptr);
   }
   std::string_view name() const override { return "cwbvh_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {

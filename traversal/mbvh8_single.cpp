@@ -43,7 +43,21 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
   // tri_width=4: layout 0, 8: layout 1.
   explicit MBVH8Single(const SchemeConfig& cfg)
       : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1),
-        order_(parse_order_param(cfg.get_choice("order"))) {}
+        order_(parse_order_param(cfg.get_choice("order"))) {
+    // Every option works or is refused: the sorted orders (and their prefetch) run on 8-wide
+    // blocks only (run() below), and tri_width=4 has 4-wide blocks everywhere, so `small` has
+    // nothing to choose. (The kernels other than watertight take the branching order too; that
+    // is not refused, since `table accuracy` runs one entry under every kernel.)
+    const char* unsorted = cfg.get_int("tri_width") == 4 ? "tri_width=4 takes the branching order"
+                           : order_ == OrderParam::branching ? "order=branching"
+                                                             : nullptr;
+    if (unsorted && order_ != OrderParam::branching)
+      cfg.refuse_if_changed("order", std::string("picks among the loops of 8-wide blocks (") +
+                                         unsorted + "): drop order");
+    check_prefetch_params(cfg, unsorted);
+    if (cfg.get_int("tri_width") == 4)
+      cfg.refuse_if_changed("small", "selects 4-wide blocks for small leaves, and tri_width=4 has them for every leaf: drop small");
+  }
   std::string_view name() const override { return "mbvh8_single"; }
   void prepare(const Scene& scene, StructureCache& cache) override {
     MBVHScheme::prepare(scene, cache);

@@ -44,6 +44,18 @@ bool prefetch_second_child(const SchemeConfig& cfg, size_t bytes) {
   return mode == "on" || (mode == "auto" && bytes > (size_t(cfg.get_int("llc_mib")) << 20));
 }
 
+void check_prefetch_params(const SchemeConfig& cfg, const char* unsorted) {
+  if (unsorted) {
+    for (const char* key : {"prefetch", "llc_mib"})
+      cfg.refuse_if_changed(key, std::string("steers the sorted child order's early fetch, which this scheme does not "
+                                             "take here (") + unsorted + "): drop " + key);
+    return;
+  }
+  if (cfg.get_choice("prefetch") != "auto")
+    cfg.refuse_if_changed("llc_mib", "is what prefetch=auto compares the structure with; with prefetch=" +
+                                         cfg.get_choice("prefetch") + " drop llc_mib");
+}
+
 MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
   MBVHBuildParams p;
   p.bvh = bvh_params(cfg);
@@ -53,6 +65,14 @@ MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
   p.prim_cost = cfg.get_int("prim_cost");
   p.prim_share = float(cfg.get_real("prim_share"));
   p.small = cfg.find_int("small").value_or(d.small);
+  // The SAH collapse's costs steer nothing in the greedy collapse (Dammertz 2008 takes no cost),
+  // and prim_share only scales prim_cost.
+  if (!p.sah_collapse)
+    for (const char* key : {"tri_cost", "prim_cost", "prim_share"})
+      cfg.refuse_if_changed(key, std::string("steers the SAH collapse, and this scheme collapses greedily "
+                                             "(collapse=greedy): add --param collapse=sah or drop ") + key);
+  if (p.prim_cost == 0)
+    cfg.refuse_if_changed("prim_share", "only scales prim_cost, which is 0: set prim_cost or drop prim_share");
   return p;
 }
 
@@ -82,6 +102,8 @@ void check_cwbvh_params(const MBVHBuildParams& params, const std::string& prefix
   const std::string why = " (a compressed leaf holds at most " + std::to_string(most) + " triangles)";
   if (params.merge > most) throw InputError(prefix + "merge must be <= " + std::to_string(most) + why);
   if (params.bvh.max_leaf > most) throw InputError(prefix + "leaf_size must be <= " + std::to_string(most) + why);
+  if (params.small != 0)
+    throw InputError(prefix + "small must be 0 (the compressed layout holds 8-wide blocks only; tree=mbvh8 takes small=4)");
 }
 
 template MBVHData<4, 4> fetch_mbvh<4, 4>(const Scene&, StructureCache&, const MBVHBuildParams&, TriKernel);

@@ -52,6 +52,9 @@ ParamSpecs prefetch_param_specs();
 ParamSpec mbvh8_order_param();
 // Whether a structure of `bytes` (nodes and triangle blocks) gets the early fetch under `cfg`.
 bool prefetch_second_child(const SchemeConfig& cfg, size_t bytes);
+// Refuses prefetch and llc_mib where they change nothing: `unsorted` names why the scheme never
+// takes the sorted order under `cfg` (nullptr: it may), and llc_mib is read only by prefetch=auto.
+void check_prefetch_params(const SchemeConfig& cfg, const char* unsorted);
 // What structure_info() appends so the build table and logs say which variant runs.
 inline std::string prefetch_info(bool on) {
   return on ? ", second child prefetched (sorted batches)" : ", no second-child prefetch";

@@ -173,5 +173,21 @@ std::optional<std::string> SchemeConfig::find_choice(const std::string& key) con
   const std::string* v = value(key);
   return v ? std::optional<std::string>(*v) : std::nullopt;
 }
+bool SchemeConfig::changed(const std::string& key) const {
+  const std::string* v = value(key);
+  if (!declared || !v) return false;
+  const ParamSpec& spec = *find_param(*declared, key);
+  if (spec.fallback.empty()) return true;  // no fixed default: given
+  switch (spec.type) {
+    case ParamType::integer: return param_to_int(*v) != param_to_int(spec.fallback);
+    case ParamType::boolean: return param_to_bool(*v) != param_to_bool(spec.fallback);
+    case ParamType::real: return param_to_real(*v) != param_to_real(spec.fallback);
+    case ParamType::choice: break;
+  }
+  return *v != spec.fallback;
+}
+void SchemeConfig::refuse_if_changed(const std::string& key, const std::string& why) const {
+  if (changed(key)) throw InputError("parameter '" + key + "' " + why);
+}
 
 }  // namespace tb
