@@ -305,7 +305,11 @@ std::vector<Record> run_sweep(Bench& bench, RunOptions opt, const std::string& s
                                {"params", opt.scheme_config.params},
                                {"stats", opt.stats},
                                {"interleave", opt.interleave},
-                               {"cache", opt.cache ? opt.cache_config + " " + opt.cache_policy : ""}};
+                               {"cache", opt.cache ? opt.cache_config + " " + opt.cache_policy : ""},
+                               // This command's scheme entries (each with its own parameters, which
+                               // `params` above does not hold) and workloads.
+                               {"schemes", opt.schemes},
+                               {"workloads", opt.workloads}};
   // Schemes and workloads may differ: a resume may finish a sweep or extend it by more cells.
   CellStream stream(csv, meta, resume,
                     {"command", "scene_hash", "git_revision", "seed", "width", "height", "view", "reps", "threads",

@@ -113,7 +113,8 @@ std::shared_ptr<const EmbreeScene> fetch_embree_scene(const Scene& scene, Struct
 ParamSpecs embree_param_specs() {
   return {bool_param("robust", true, "RTC_SCENE_FLAG_ROBUST: Embree's watertight mode (0: its fast default)"),
           choice_param("quality", "high", {"low", "medium", "high"},
-                       "rtcSetSceneBuildQuality: low (Morton), medium (binned SAH), high (SAH; spatial splits when robust=0)"),
+                       "rtcSetSceneBuildQuality: low (Morton), medium (binned SAH), high (SAH; spatial splits when robust=0; "
+                       "with robust=1 Embree builds high as medium)"),
           choice_param("isa", "default", kIsaNames,
                        "Embree's kernel ISA: default (its run-time choice, the CPU's best) or the device config "
                        "isa=NAME, for like-for-like comparisons across machines (refused where the CPU lacks it)")};

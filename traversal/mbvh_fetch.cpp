@@ -7,7 +7,8 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
   return bvh_param_specs(d.leaf_size, d.spatial) +
          ParamSpecs{int_param("merge", d.merge, 0, 64,
                               "binary subtrees of at most this many triangles become one leaf (0: off; SAH "
-                              "collapse: the largest leaf)"),
+                              "collapse: the largest leaf, never below one block: values under the block width act "
+                              "as the block width)"),
                     choice_param("collapse", d.sah ? "sah" : "greedy", {"greedy", "sah"},
                                  "binary -> wide collapse: greedy (Dammertz 2008) or SAH-optimal (Ylitie 2017)"),
                     int_param("tri_cost", p.tri_cost, 1, 10000,
