@@ -8,6 +8,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "harness/trace_runner.h"  // median_of
 #include "structures/scene.h"  // InputError
 
 namespace tb {
@@ -210,7 +211,7 @@ void check_rays(const CsvTable& t, size_t row) {
   if (col < 0) return;
   const std::string& s = t.at(row, col);
   const std::optional<double> v = parse_number(s);
-  if (!v || !(*v >= 0) || std::floor(*v) != *v)
+  if (!v || !std::isfinite(*v) || !(*v >= 0) || std::floor(*v) != *v)
     throw InputError(where(t, row) + ": rays: '" + s + "' is not a ray count (a whole number >= 0)");
 }
 
@@ -219,10 +220,7 @@ void check_rays(const CsvTable& t, size_t row) {
 // row does not report.
 void check_samples_median(const CsvTable& t, size_t row, const std::vector<double>& samples, double median) {
   if (samples.empty()) return;
-  std::vector<double> v = samples;
-  std::sort(v.begin(), v.end());
-  const size_t n = v.size();
-  const double m = n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+  const double m = median_of(samples);  // as `run` takes it (harness/trace_runner.h)
   if (!(std::fabs(m - median) <= 1e-4 * std::max(std::fabs(m), std::fabs(median))))
     throw InputError(where(t, row) + ": mrays_median " + shown(median) + " is not the median of its mrays_samples (" +
                      shown(m) + ")");

@@ -319,6 +319,7 @@ TEST(Compare, ValuesThatAreNotSpeedsOrAccuraciesNameFileRowAndColumn) {
       // A ray count that is no count, and a median that is not its samples' (the U test ran on them).
       {"room,primary,bvh_single,-1,10,10;10.1;9.9,0,0", {"rays", "'-1'", "whole number"}},
       {"room,primary,bvh_single,40.5,10,10;10.1;9.9,0,0", {"rays", "'40.5'"}},
+      {"room,primary,bvh_single,inf,10,10;10.1;9.9,0,0", {"rays", "'inf'"}},
       {"room,primary,bvh_single,4096,4.44,1e308;1e308;1e308,0,0", {"mrays_median 4.44", "not the median", "1e+308"}},
       {"room,primary,bvh_single,4096,10,10;12;12,0,0", {"mrays_median 10", "not the median"}},
   };
