@@ -98,6 +98,14 @@ void check_files(const std::vector<FileArg>& inputs, const std::vector<FileArg>&
 }
 
 // The files loading a --scene argument reads (none for a built-in scene).
+// --view on a workload whose rays no camera view changes would label its rows with a view that
+// was not used: refused, naming the workload.
+void check_view_applies(const WorkloadSpec& spec) {
+  if (!uses_view(spec))
+    throw InputError("--view: workload '" + spec.name() +
+                     "' does not use a camera view (its rays are the same for every view): run it without --view");
+}
+
 std::vector<FileArg> scene_inputs(const std::string& scene_arg) {
   std::vector<FileArg> in;
   if (const std::string file = scene_file_of(scene_arg); !file.empty())
@@ -406,7 +414,11 @@ int main(int argc, char** argv) {
       ro.workloads.clear();
       std::stringstream ss(workloads_arg);
       for (std::string w; std::getline(ss, w, ',');)
-        if (!w.empty()) ro.workloads.push_back(parse_workload(w).name());
+        if (!w.empty()) {
+          const WorkloadSpec spec = parse_workload(w);
+          if (view_given) check_view_applies(spec);
+          ro.workloads.push_back(spec.name());
+        }
       if (ro.workloads.empty()) throw InputError("--workloads is empty");
       if (ro.interleave && resume)
         throw InputError("--interleave times a workload's schemes together: it cannot --resume a run that kept some");
@@ -436,6 +448,7 @@ int main(int argc, char** argv) {
     }
     if (*rays) {
       WorkloadSpec spec = parse_workload(workload_arg);
+      if (view_given) check_view_applies(spec);
       spec.width = ro.width, spec.height = ro.height, spec.view = ro.view, spec.seed = ro.seed;
       write_rays(rays_out, bench.rays(spec));
       return 0;

@@ -95,6 +95,9 @@ TEST_F(BadInput, OptionValuesAreValidatedAndNamed) {
       {rays + " --width -16", {"--width"}},
       {rays + " --view 0", {"--view"}},
       {rays + " --view 4", {"--view 4", "3 camera views"}},  // range ok, but the scene has 3 views
+      // A view given to workloads no view changes would label their rows with it: refused.
+      {"run --scene room --workloads primary,rnd2 --view 2" + csv, {"--view", "'rnd2'", "without --view"}},
+      {"rays --scene room --workload hard:edges --view 2 --out " + path("r.bin"), {"--view", "'hard:edges'"}},
       {"run --scene room --workloads divergence:0" + csv, {"--workloads", "divergence:0"}},
       {"run --scene room --workloads divergence:4096" + csv, {"--workloads", "divergence"}},
       {"run --scene room --workloads primary,bounce:0" + csv, {"--workloads", "bounce:0"}},

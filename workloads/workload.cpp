@@ -268,6 +268,8 @@ RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float diverg
   return b;
 }
 
+bool uses_view(const WorkloadSpec& spec) { return spec.kind != "rnd2" && spec.kind.rfind("hard:", 0) != 0; }
+
 RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const ClosestHitFn& reference) {
   RayBatch b;
   if (spec.kind == "primary") b = primary_rays(scene, spec, 1.f);

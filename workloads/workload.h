@@ -50,6 +50,10 @@ double centre_pixel_deg(const Scene& scene, const WorkloadSpec& spec);
 // throws InputError naming the problem.
 WorkloadSpec parse_workload(const std::string& text);
 std::vector<std::string> workload_names();
+// Whether the rays depend on the camera view (spec.view): every workload but rnd2 (origins on the
+// scene's surfaces) and the hard cases (built from the scene's triangles). `--view` is refused for
+// the others rather than recorded on rows whose rays it did not change.
+bool uses_view(const WorkloadSpec& spec);
 
 // Generates the rays. Bounce and shadow workloads trace their paths with `reference` (the
 // reference scheme prepared on this scene); the others ignore it. Deterministic given the spec
