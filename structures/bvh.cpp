@@ -398,15 +398,7 @@ uint32_t BVHSubtreeBuilder::build(BVH& bvh, uint32_t node, std::span<PrimRef> re
 
 BVH BVH::build(const Scene& scene, const BVHBuildParams& p) {
   if (p.builder == BVHBuilder::embree) return build_embree_bvh(scene, p);
-  if (p.spatial) {
-    SpatialSplitParams sp;
-    sp.alpha = p.split_alpha;
-    sp.budget = p.split_budget;
-    sp.wall = p.split_wall;
-    sp.overlap = p.split_overlap;
-    sp.walls_apart = p.split_walls;
-    return build_spatial_bvh(scene, p, sp);
-  }
+  if (p.spatial) return build_spatial_bvh(scene, p, spatial_split_params(p));
   const auto t0 = std::chrono::steady_clock::now();
   const uint32_t n = uint32_t(scene.num_triangles());
   // Uninitialised: the loop below writes every reference once.

@@ -541,6 +541,16 @@ BVH build_spatial(const Scene& scene, size_t n, const Fill& fill, const BVHBuild
 
 }  // namespace
 
+SpatialSplitParams spatial_split_params(const BVHBuildParams& p) {
+  SpatialSplitParams sp;
+  sp.alpha = p.split_alpha;
+  sp.budget = p.split_budget;
+  sp.wall = p.split_wall;
+  sp.overlap = p.split_overlap;
+  sp.walls_apart = p.split_walls;
+  return sp;
+}
+
 BVH build_spatial_bvh(const Scene& scene, std::vector<SpatialRef> refs, const BVHBuildParams& params,
                       const SpatialSplitParams& sp) {
   const auto t0 = std::chrono::steady_clock::now();

@@ -79,6 +79,10 @@ struct SpatialRef {
   uint32_t prim;
 };
 
+// The spatial-split parameters a BVHBuildParams carries (split_alpha, split_budget, ...), the
+// rest at their defaults: what BVH::build and RayGrid's mini-BVH builds pass.
+SpatialSplitParams spatial_split_params(const BVHBuildParams& params);
+
 // Spatial-split build over the whole scene.
 BVH build_spatial_bvh(const Scene& scene, const BVHBuildParams& params, const SpatialSplitParams& sp = {});
 // Over given references (e.g. triangles already clipped to an octree cell): the boxes are the

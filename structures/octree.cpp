@@ -8,15 +8,16 @@
 #include <cstdio>
 #include <thread>
 
+#include "structures/bvh_spatial.h"
 #include "structures/clip.h"
 
 namespace tb {
 
 std::string OctreeParams::key() const {
   char buf[128];
-  std::snprintf(buf, sizeof buf, "octree:leaf_prims=%d:max_depth=%d:mbvh_leaf=%d:merge=%d:bins=%d:width=%d",
-                leaf_prims, max_depth, mbvh_leaf, merge, bins, width);  // threads do not change the structure
-  return buf;
+  std::snprintf(buf, sizeof buf, "octree:leaf_prims=%d:max_depth=%d:merge=%d:width=%d:", leaf_prims, max_depth, merge,
+                width);  // threads do not change the structure
+  return buf + bvh.key();
 }
 
 std::string OctreeStats::describe() const {
@@ -60,9 +61,9 @@ template <int N>
 void build_minis(const Scene& scene, const OctreeParams& p, const std::vector<AABB>& tbox,
                  const std::vector<std::vector<uint32_t>>& leaf_refs, Octree& o, MBVH<N, 4>& mini) {
   MBVHBuildParams mp;
-  mp.bvh.bins = p.bins;
-  mp.bvh.max_leaf = p.mbvh_leaf;
+  mp.bvh = p.bvh;
   mp.bvh.threads = 1;  // the leaves are the parallelism
+  const SpatialSplitParams sp = spatial_split_params(p.bvh);
   mp.merge = p.merge;
   mp.sah_collapse = N == 8;
   mp.small = 0;  // 4-wide blocks throughout: RayGrid tests two rays per AVX2 pass
@@ -73,6 +74,7 @@ void build_minis(const Scene& scene, const OctreeParams& p, const std::vector<AA
     std::atomic<uint32_t> next{0};
     auto worker = [&] {
       std::vector<PrimRef> refs;
+      std::vector<SpatialRef> srefs;
       for (uint32_t l; (l = next.fetch_add(1)) < nl;) {
         if (leaf_refs[l].empty()) continue;
         const OctreeNode& nd = o.nodes[o.leaves[l].node];
@@ -83,7 +85,14 @@ void build_minis(const Scene& scene, const OctreeParams& p, const std::vector<AA
           if (!b.empty()) refs.emplace_back(b, t);  // always: the same test admitted t
         }
         if (refs.empty()) continue;
-        const BVH bvh = BVH::build(std::span<PrimRef>(refs), mp.bvh);
+        BVH bvh;
+        if (mp.bvh.spatial) {
+          srefs.clear();
+          for (const PrimRef& r : refs) srefs.push_back({r.box(), r.id()});
+          bvh = build_spatial_bvh(scene, std::move(srefs), mp.bvh, sp);
+        } else {
+          bvh = BVH::build(std::span<PrimRef>(refs), mp.bvh);
+        }
         cull[l] = AABB{bvh.nodes[0].lo, bvh.nodes[0].hi};
         parts[l] = MBVH<N, 4>::collapse(scene, bvh, mp);
       }
@@ -142,7 +151,8 @@ Octree Octree::build(const Scene& scene, const OctreeParams& p) {
   const auto t0 = std::chrono::steady_clock::now();
   if (p.leaf_prims < 1) throw InputError("octree: leaf_prims must be >= 1");
   if (p.max_depth < 0 || p.max_depth > 20) throw InputError("octree: max_depth must be in [0, 20]");
-  if (p.mbvh_leaf < 1 || p.mbvh_leaf > 64) throw InputError("octree: mbvh_leaf must be in [1, 64]");
+  if (p.bvh.max_leaf < 1 || p.bvh.max_leaf > 64) throw InputError("octree: the mini-BVHs' max_leaf must be in [1, 64]");
+  if (p.bvh.builder != BVHBuilder::travbench) throw InputError("octree: the mini-BVHs are built by travbench's builder");
   if (p.merge < 0 || p.merge > 64) throw InputError("octree: merge must be in [0, 64]");
   if (p.width != 4 && p.width != 8) throw InputError("octree: width must be 4 or 8");
   Octree o;

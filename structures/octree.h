@@ -49,9 +49,13 @@ namespace tb {
 struct OctreeParams {
   int leaf_prims = 4096;  // subdivide while a node references more triangles than this ...
   int max_depth = 10;     // ... and is shallower than this (root depth 0)
-  int mbvh_leaf = 4;      // binary SAH leaves of the mini-MBVHs: at most this many triangles
+  // The binary build of each mini-MBVH: bvh.max_leaf (at most this many triangles per binary
+  // leaf), bvh.bins (SAH bins per axis) and the spatial splits (bvh.spatial, bvh.split_*: the
+  // leaf's references, already clipped to its padded box, are clipped again by the spatial-split
+  // builder, structures/bvh_spatial.h; the enclosure rule `split_wall` is relative to the leaf's
+  // geometry). Off by default, as the thesis built them. bvh.builder must be travbench's.
+  BVHBuildParams bvh;
   int merge = 4;          // binary subtrees of at most this many triangles become one leaf
-  int bins = 16;          // SAH bins per axis
   // Mini-MBVH width. 4: the thesis' SSE mini-MBVHs, collapsed greedily (`merge` = subtrees of at
   // most that many triangles become one leaf). 8: AVX2 nodes (MBVHNode<8>, one 8-lane box test
   // per ray), collapsed SAH-optimally by structures/mbvh.cpp's dynamic programme (Ylitie et al.

@@ -46,13 +46,17 @@
 // 8-wide ones 768 measured 2-5% faster on bounce:3), leaf_prims (default 4096, §5.4.1), max_depth
 // (default 10), feed (rays per slice), width of the mini-MBVHs (default 8, see stream), and
 // leaf_size / merge / bins of their binary builds (4 / 4 / 16,
-// as mbvh4_single).
+// as mbvh4_single), and spatial / split_* (spatial splits in the mini-BVHs, Stich et al. 2009, as
+// every BVH-based scheme takes them; off, as the thesis built them: measured neutral, 0.975-1.015
+// of spatial=0 on primary and bounce:3 of 8 scenes, since the octree has already clipped every
+// triangle to its cells; docs/PERFORMANCE.md, session 38).
 #include <algorithm>
 #include <atomic>
 #include <bit>
 #include <cstring>
 
 #include "structures/octree.h"
+#include "traversal/bvh_common.h"
 #include "traversal/mbvh_stream.h"
 #include "traversal/raygrid_stats.h"
 #include "traversal/scratch_pool.h"
@@ -156,8 +160,9 @@ class RayGrid final : public TraverserBase<RayGrid> {
     feed_ = uint32_t(cfg.get_int("feed"));
     params_.leaf_prims = cfg.get_int("leaf_prims");
     params_.max_depth = cfg.get_int("max_depth");
-    params_.mbvh_leaf = cfg.get_int("leaf_size");
-    params_.bins = cfg.get_int("bins");
+    params_.bvh.max_leaf = cfg.get_int("leaf_size");
+    params_.bvh.bins = cfg.get_int("bins");
+    read_spatial_params(cfg, params_.bvh);
     params_.width = cfg.get_int("width");
     params_.merge = cfg.get_int("merge");
     order_ = mbvh_stream::order_of(cfg);
@@ -625,17 +630,18 @@ const Octree* raygrid_octree(const Traverser& t) {
 std::unique_ptr<Traverser> make_raygrid(const SchemeConfig& cfg) { return std::make_unique<RayGrid>(cfg); }
 ParamSpecs params_raygrid() {
   const OctreeParams o;
-  return {int_param("queue", 768, 1, 65535, "ray queue capacity M (thesis 5.3: 384 on its machine)"),
+  return ParamSpecs{int_param("queue", 768, 1, 65535, "ray queue capacity M (thesis 5.3: 384 on its machine)"),
           int_param("feed", int(kMaxChunk), 1, 1 << 30, "rays fed per slice before queues are processed (default: all, Alg. 5.1)"),
           int_param("leaf_prims", o.leaf_prims, 1, 1 << 30, "subdivide octree nodes referencing more triangles than this"),
           int_param("max_depth", o.max_depth, 0, 20, "octree depth limit (root: 0)"),
-          int_param("leaf_size", o.mbvh_leaf, 1, 64, "most triangles in a binary SAH leaf of a mini-MBVH"),
-          int_param("bins", o.bins, 2, 256, "binned-SAH bins per axis of the mini-MBVH builds"),
+          int_param("leaf_size", o.bvh.max_leaf, 1, 64, "most triangles in a binary SAH leaf of a mini-MBVH"),
+          int_param("bins", o.bvh.bins, 2, 256, "binned-SAH bins per axis of the mini-MBVH builds"),
           // 8-wide mini-MBVHs by default (§5.3.2 uses the SIMD width of its machine, 4): on bounce:3
           // they made raygrid 5-25% faster than the thesis' 4-wide ones (docs/PERFORMANCE.md).
           int_choice_param("width", 8, {4, 8}, "mini-MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
           int_param("merge", o.merge, 0, 64, "binary subtrees of at most this many triangles become one mini-MBVH leaf"),
-          mbvh_stream::order_param()};
+          mbvh_stream::order_param()} +
+         spatial_param_specs(false, "the octree leaf's geometry");
 }
 
 }  // namespace tb
