@@ -118,6 +118,26 @@ bool parse_int_prefix(std::string_view tok, long long& out, std::string_view* re
   return true;
 }
 
+// What may follow a face vertex's position index: nothing, "/vt", "/vt/vn" or "//vn" (the texture
+// and normal indices carry no geometry, but a token of another shape, "1////" or "1/x", is a
+// malformed file, not a vertex).
+bool obj_vertex_suffix_ok(std::string_view rest) {
+  if (rest.empty()) return true;
+  long long unused;
+  std::string_view more;
+  rest.remove_prefix(1);  // the '/' the caller checked
+  if (!rest.empty() && rest[0] != '/') {  // vt
+    if (!parse_int_prefix(rest, unused, &more)) return false;
+    rest = more;
+    if (rest.empty()) return true;
+    if (rest[0] != '/') return false;
+  } else if (rest.empty()) {
+    return false;  // "v/" names nothing
+  }
+  rest.remove_prefix(1);  // the second '/': a normal index must follow
+  return parse_int_prefix(rest, unused, nullptr);
+}
+
 std::string quote(std::string_view s) {
   std::string out = "'";
   for (char c : s.substr(0, 40)) out += (static_cast<unsigned char>(c) < 32 || c == 127) ? '?' : c;
@@ -178,6 +198,9 @@ Scene parse_obj(const std::string& path, const std::string& data) {
         std::string_view rest;
         if (!parse_int_prefix(tok, i, &rest) || (!rest.empty() && rest[0] != '/'))
           throw InputError(error_line(path, at_line(lines.line) + "face vertex " + quote(tok) + " is not an index"));
+        if (!obj_vertex_suffix_ok(rest))
+          throw InputError(error_line(path, at_line(lines.line) + "face vertex " + quote(tok) +
+                                                " is not v, v/vt, v//vn or v/vt/vn"));
         long long idx;
         if (i > 0) {
           idx = i - 1;

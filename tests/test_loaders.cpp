@@ -362,6 +362,10 @@ TEST_F(LoaderTest, ObjBadInput) {
   expect_input_error(write("inf.obj", "v 1 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n"), "line 2: vertex 2 has a NaN or Inf");
   expect_input_error(write("word.obj", "v 1 x 0\n"), "vertex coordinate 'x' is not a number");
   expect_input_error(write("badidx.obj", v3 + "f 1 2 a\n"), "face vertex 'a' is not an index");
+  // The texture and normal indices carry no geometry, but only the four OBJ forms are vertices.
+  for (const char* bad : {"3////", "3/", "3//", "3/1/", "3/x", "3/1/1/1", "3//x", "3/1x"})
+    expect_input_error(write("badform.obj", v3 + "f 1 2 " + bad + "\n"), "is not v, v/vt, v//vn or v/vt/vn");
+  EXPECT_EQ(tb::load_scene_file(write("forms.obj", v3 + "f 1 2/5 3//-1\nf 1/2/3 2/-1/4 3\n")).num_triangles(), 2u);
   expect_input_error(write("twovert.obj", v3 + "f 1 2\n"), "face has 2 vertices");
   expect_input_error(write("shortv.obj", "v 1 2\n"), "vertex needs three coordinates");
   // Truncation in the middle of the last line.
