@@ -235,13 +235,17 @@ void t_bounds(const Cand& c, double& lo, double& hi) {
   hi += std::fabs(hi) * 4 * kU;
 }
 
-Hit finish(const Ray& ray, const Cand& best, Vec3 A, Vec3 B, Vec3 C) {
+// `known`: best's exact T and D where a tie already formed them (closest's ExactTD), so that they
+// are not formed twice.
+Hit finish(const Ray& ray, const Cand& best, Vec3 A, Vec3 B, Vec3 C, const ExactTD* known = nullptr) {
   if (best.prim == kNoHit) return Hit{};
   double lo, hi;
   t_bounds(best, lo, hi);
   float t;
   if (float(lo) == float(hi)) {
     t = float(lo);  // round to nearest is monotonic: every value in [lo, hi] rounds to it
+  } else if (known && known->v) {
+    t = round_to_float(mpq_class(known->v->T / known->v->D));
   } else {
     mpq_class T, D;
     exact_td(ray, A, B, C, T, D);
@@ -251,9 +255,9 @@ Hit finish(const Ray& ray, const Cand& best, Vec3 A, Vec3 B, Vec3 C) {
   return Hit{t, best.prim, float(best.u), float(best.v)};
 }
 
-Hit finish_closest(const Ray& ray, const Scene& s, const Cand& best) {
+Hit finish_closest(const Ray& ray, const Scene& s, const Cand& best, const ExactTD* known = nullptr) {
   if (best.prim == kNoHit) return Hit{};
-  return finish(ray, best, s.vertex(best.prim, 0), s.vertex(best.prim, 1), s.vertex(best.prim, 2));
+  return finish(ray, best, s.vertex(best.prim, 0), s.vertex(best.prim, 1), s.vertex(best.prim, 2), known);
 }
 
 // Conservative slab test in double: a box the ray touches for some t in [tmin, tfar] in exact
@@ -357,7 +361,7 @@ Hit ExactOracle::closest(const Ray& ray, uint64_t* tri_tests) const {
     t_bounds(best, lo, tfar);  // an equal exact t of a lower id must still be found: inclusive
     if (tfar > ray.tmax) tfar = ray.tmax;
   });
-  return finish_closest(ray, *scene_, best);
+  return finish_closest(ray, *scene_, best, &best_exact);
 }
 
 std::vector<Hit> ExactOracle::all_hits(const Ray& ray) const {
@@ -380,7 +384,7 @@ Hit ExactOracle::closest_brute_force(const Ray& ray) const {
     ExactTD c_exact;
     if (closer(ray, *scene_, c, best, c_exact, best_exact)) best = c, best_exact = std::move(c_exact);
   }
-  return finish_closest(ray, *scene_, best);
+  return finish_closest(ray, *scene_, best, &best_exact);
 }
 
 namespace {
