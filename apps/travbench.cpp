@@ -97,7 +97,6 @@ void check_files(const std::vector<FileArg>& inputs, const std::vector<FileArg>&
   check_distinct_files(inputs, outputs);
 }
 
-// The files loading a --scene argument reads (none for a built-in scene).
 // --view on a workload whose rays no camera view changes would label its rows with a view that
 // was not used: refused, naming the workload.
 void check_view_applies(const WorkloadSpec& spec) {
@@ -106,6 +105,7 @@ void check_view_applies(const WorkloadSpec& spec) {
                      "' does not use a camera view (its rays are the same for every view): run it without --view");
 }
 
+// The files loading a --scene argument reads (none for a built-in scene).
 std::vector<FileArg> scene_inputs(const std::string& scene_arg) {
   std::vector<FileArg> in;
   if (const std::string file = scene_file_of(scene_arg); !file.empty())

@@ -113,9 +113,9 @@ CostImage cost_image(Bench& bench, const ImageOptions& opt) {
   WorkloadSpec spec = parse_workload(opt.workload);
   spec.width = opt.width, spec.height = opt.height, spec.view = opt.view, spec.seed = opt.seed;
   // By kind, not by the batch alone: a batch of no rays (a hard case on a scene it finds nothing
-  // in, or every path gone) has as many pixels as rays.
-  const bool camera = spec.kind == "primary" || spec.kind == "divergence" || spec.kind == "bounce" || spec.kind == "shadow";
-  RayBatch batch = bench.rays(spec);
+  // in, or every path gone) has as many pixels as rays. Decided before any ray is made.
+  const bool camera = from_camera_pixels(spec);
+  RayBatch batch = camera ? bench.rays(spec) : RayBatch{};
   if (!camera || batch.pixel.size() != batch.size())
     throw InputError("--workload " + spec.name() +
                      ": its rays do not come from camera pixels (use primary, divergence:D, bounce:k or shadow)");

@@ -269,6 +269,9 @@ RayBatch primary_rays(const Scene& scene, const WorkloadSpec& spec, float diverg
 }
 
 bool uses_view(const WorkloadSpec& spec) { return spec.kind != "rnd2" && spec.kind.rfind("hard:", 0) != 0; }
+bool from_camera_pixels(const WorkloadSpec& spec) {
+  return spec.kind == "primary" || spec.kind == "divergence" || spec.kind == "bounce" || spec.kind == "shadow";
+}
 
 RayBatch generate_workload(const Scene& scene, const WorkloadSpec& spec, const ClosestHitFn& reference) {
   RayBatch b;

@@ -54,6 +54,9 @@ std::vector<std::string> workload_names();
 // scene's surfaces) and the hard cases (built from the scene's triangles). `--view` is refused for
 // the others rather than recorded on rows whose rays it did not change.
 bool uses_view(const WorkloadSpec& spec);
+// Whether the rays are one per camera pixel, each ray's pixel known (primary, divergence, bounce,
+// shadow): decided by kind, since a batch of no rays has as many pixels as rays whatever made it.
+bool from_camera_pixels(const WorkloadSpec& spec);
 
 // Generates the rays. Bounce and shadow workloads trace their paths with `reference` (the
 // reference scheme prepared on this scene); the others ignore it. Deterministic given the spec
