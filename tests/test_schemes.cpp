@@ -209,6 +209,26 @@ TEST(Registry, SpatialSplitParametersAreRefusedWithoutSpatialSplits) {
   }
 }
 
+// mbvh_rs's `spatial` default follows its width: the 8-wide streams trace the spatial-split tree,
+// the thesis' 4-wide layout the plain one. The tree built is the one the explicit value builds
+// (same structure bytes, which spatial splits change on the room), and split_* is taken or refused
+// by the resolved value.
+TEST(Registry, MbvhRsSpatialDefaultFollowsItsWidth) {
+  Bench& bench = bench_for("room");
+  const auto bytes = [&](const std::string& entry) {
+    auto t = make_scheme(entry);
+    t->prepare(bench.scene(), bench.cache());
+    return t->structure_bytes();
+  };
+  EXPECT_EQ(resolve_config("mbvh_rs", {}).find_bool("spatial"), std::nullopt);  // depends on width
+  EXPECT_EQ(bytes("mbvh_rs"), bytes("mbvh_rs:spatial=1"));
+  EXPECT_NE(bytes("mbvh_rs"), bytes("mbvh_rs:spatial=0"));
+  EXPECT_EQ(bytes("mbvh_rs:width=4"), bytes("mbvh_rs:width=4:spatial=0"));
+  EXPECT_NE(bytes("mbvh_rs:width=4"), bytes("mbvh_rs:width=4:spatial=1"));
+  EXPECT_NO_THROW(make_scheme("mbvh_rs:split_budget=2"));
+  EXPECT_THROW(make_scheme("mbvh_rs:width=4:split_budget=2"), InputError);
+}
+
 // builder=embree (structures/embree_bvh.h) takes spatial, split_budget, leaf_size and the costs;
 // travbench's own builder knobs (bins, split_alpha, split_overlap, split_wall, split_walls) would
 // change nothing there and are refused, as is a leaf size Embree cannot build.

@@ -33,8 +33,8 @@ ParamSpecs bvh_param_specs(int default_leaf, bool default_spatial) {
          spatial_param_specs(default_spatial, "the scene's extent");
 }
 
-void read_spatial_params(const SchemeConfig& cfg, BVHBuildParams& p) {
-  p.spatial = cfg.get_bool("spatial");
+void read_spatial_params(const SchemeConfig& cfg, BVHBuildParams& p, bool spatial) {
+  p.spatial = cfg.find_bool("spatial").value_or(spatial);
   p.split_alpha = float(cfg.get_real("split_alpha"));
   p.split_budget = float(cfg.get_real("split_budget"));
   p.split_wall = float(cfg.get_real("split_wall"));
@@ -49,12 +49,14 @@ void read_spatial_params(const SchemeConfig& cfg, BVHBuildParams& p) {
                                              "(spatial=0): add --param spatial=1 or drop ") + key);
 }
 
-BVHBuildParams bvh_params(const SchemeConfig& cfg) {
+BVHBuildParams bvh_params(const SchemeConfig& cfg) { return bvh_params(cfg, false); }
+
+BVHBuildParams bvh_params(const SchemeConfig& cfg, bool spatial) {
   BVHBuildParams p;
   p.builder = cfg.get_choice("builder") == "embree" ? BVHBuilder::embree : BVHBuilder::travbench;
   p.bins = cfg.get_int("bins");
   p.max_leaf = cfg.get_int("leaf_size");
-  read_spatial_params(cfg, p);
+  read_spatial_params(cfg, p, spatial);
   // Embree's builder (structures/embree_bvh.h) takes none of travbench's builder knobs but spatial
   // and split_budget.
   if (p.builder == BVHBuilder::embree)

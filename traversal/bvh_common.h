@@ -13,12 +13,16 @@ namespace tb {
 // splits by default, docs/PERFORMANCE.md "Spatial splits by default"; the thesis' schemes do not).
 ParamSpecs bvh_param_specs(int default_leaf = 4, bool default_spatial = false);
 BVHBuildParams bvh_params(const SchemeConfig& cfg);
+// The same for a scheme that declares `spatial` with auto_default (its default depends on another
+// parameter, as mbvh_rs's on its width): `spatial` is the value when the user gave none.
+BVHBuildParams bvh_params(const SchemeConfig& cfg, bool spatial);
 // The spatial-split part of them (`spatial`, `split_*`) on their own, for a scheme whose binary
 // builds take other parameters (RayGrid's mini-BVHs), and their reader, which refuses split_*
 // without spatial=1. `extent`: what split_wall's fraction is of, in its description (the scene's
 // extent for a whole-scene build).
 ParamSpecs spatial_param_specs(bool default_spatial, const std::string& extent);
-void read_spatial_params(const SchemeConfig& cfg, BVHBuildParams& p);
+// `spatial`: the value of an auto_default `spatial` the user did not give.
+void read_spatial_params(const SchemeConfig& cfg, BVHBuildParams& p, bool spatial = false);
 
 using BVHData = TreeData<BVH>;
 inline BVHData fetch_bvh(const Scene& scene, StructureCache& cache, const BVHBuildParams& params, TriKernel kernel) {

@@ -59,7 +59,7 @@ void check_prefetch_params(const SchemeConfig& cfg, const char* unsorted) {
 
 MBVHBuildParams mbvh_params(const SchemeConfig& cfg, const MBVHDefaults& d) {
   MBVHBuildParams p;
-  p.bvh = bvh_params(cfg);
+  p.bvh = bvh_params(cfg, d.spatial);
   p.merge = cfg.find_int("merge").value_or(d.merge);
   p.sah_collapse = cfg.find_choice("collapse").value_or(d.sah ? "sah" : "greedy") == "sah";
   p.tri_cost = cfg.get_int("tri_cost");

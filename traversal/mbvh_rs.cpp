@@ -71,7 +71,14 @@ constexpr int kDefaultStream = 8192;
 // 4: the thesis' greedy collapse with merged 4-triangle leaves; 8: the SAH collapse
 // (mbvh8_single's) with leaves of up to 8 triangles (two blocks). bounce:3, rays/s relative
 // to mbvh8_single, merge 4 / 8 / 16: conference 1.12 / 1.23 / 1.26, sponza 1.16 / 1.25 / 1.11.
-constexpr MBVHDefaults kDefaults4{4, 4, false, 0, false, false}, kDefaults8{4, 8, true, 0, false, false};
+// spatial: the 8-wide streams trace the spatial-split tree (structures/bvh_spatial.h), as
+// mbvh8_single does; the 4-wide ones the thesis' plain one. In-process rounds, mbvh_rs spatial=1 /
+// spatial=0 (docs/PERFORMANCE.md, "Session 39"): bounce:3 sponza 1.10-1.12, crytek_sponza_partial
+// 1.04-1.05, conference 1.03, sibenik 1.00-1.03, dragon_100k and buddha_100k 1.01-1.04, sponza turned
+// 23 degrees off the axes 1.22; sibenik_lucy, room, stadium and the held-out-shaped scene 0.99-1.01,
+// spheres:1000000 0.96-0.98; primary rays sponza 1.27, stadium 1.11. Until session 36's ordered
+// streams it had measured slower (session 17).
+constexpr MBVHDefaults kDefaults4{4, 4, false, 0, false, false}, kDefaults8{4, 8, true, 0, true, false};
 
 class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBVHData<8, 4>> {
  public:
@@ -232,9 +239,10 @@ class MBVHRayStream final : public MBVHScheme<MBVHRayStream, MBVHData<4, 4>, MBV
 std::unique_ptr<Traverser> make_mbvh_rs(const SchemeConfig& cfg) { return std::make_unique<MBVHRayStream>(cfg); }
 ParamSpecs params_mbvh_rs() {
   ParamSpecs p = mbvh_param_specs(kDefaults8);
-  ParamSpec &merge = param_named(p, "merge"), &collapse = param_named(p, "collapse");
+  ParamSpec &merge = param_named(p, "merge"), &collapse = param_named(p, "collapse"), &spatial = param_named(p, "spatial");
   merge = auto_default(merge, "4 with width=4, 8 with width=8");
   collapse = auto_default(collapse, "greedy with width=4, sah with width=8");
+  spatial = auto_default(spatial, "0 with width=4 (the thesis' tree), 1 with width=8");
   return p + ParamSpecs{int_choice_param("width", kDefaultWidth, {4, 8}, "MBVH width: 4 (the thesis' SSE layout) or 8 (AVX2)"),
                         int_param("stream", kDefaultStream, 1, 65536,
                                   "most rays per stream (consecutive packets of the batch; the thesis tables run 256)"),

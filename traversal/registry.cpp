@@ -169,6 +169,10 @@ std::optional<int> SchemeConfig::find_int(const std::string& key) const {
   const std::string* v = value(key);
   return v ? std::optional<int>(param_to_int(*v)) : std::nullopt;
 }
+std::optional<bool> SchemeConfig::find_bool(const std::string& key) const {
+  const std::string* v = value(key);
+  return v ? std::optional<bool>(param_to_bool(*v)) : std::nullopt;
+}
 std::optional<std::string> SchemeConfig::find_choice(const std::string& key) const {
   const std::string* v = value(key);
   return v ? std::optional<std::string>(*v) : std::nullopt;

@@ -43,6 +43,7 @@ struct SchemeConfig {
   // For parameters whose default depends on others (ParamSpec::fallback empty): nullopt when not given.
   std::optional<int> find_int(const std::string& key) const;
   std::optional<std::string> find_choice(const std::string& key) const;
+  std::optional<bool> find_bool(const std::string& key) const;
   // Whether the user set `key` to something other than its declared default (a parameter without
   // a fixed default: whether it was given at all). For refusing a parameter that changes nothing
   // under the values of the others: every option either works or is refused.
