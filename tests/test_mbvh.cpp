@@ -616,12 +616,16 @@ TEST(MBVH, EveryKernelVariantRuns) {
   struct V {
     const char* scheme;
     const char* tri_width;
+    const char* order = "";  // mbvh8_single's sorted orders run under every kernel too
   };
-  for (const V& v : {V{"mbvh4_single", ""}, V{"mbvh8_single", "4"}, V{"mbvh8_single", "8"}, V{"mbvh_rs", ""}}) {
+  for (const V& v : {V{"mbvh4_single", ""}, V{"mbvh8_single", "4"}, V{"mbvh8_single", "8"}, V{"mbvh8_single", "8", "sort"},
+                     V{"mbvh8_single", "8", "prefetch"}, V{"mbvh_rs", ""}}) {
     for (TriKernel k : kAllTriKernels) {
       SchemeConfig cfg;
       cfg.kernel = k;
       if (*v.tri_width) cfg.params["tri_width"] = v.tri_width;
+      if (*v.order) cfg.params["order"] = "sort";
+      if (std::string(v.order) == "prefetch") cfg.params["prefetch"] = "on";
       auto t = make_scheme(v.scheme, cfg);
       t->prepare(bench.scene(), bench.cache());
       EXPECT_GT(t->structure_bytes(), 0u);
@@ -631,7 +635,7 @@ TEST(MBVH, EveryKernelVariantRuns) {
       for (size_t i = 0; i < hits.size(); ++i) {
         const Hit& h = hits[i];
         if (h.hit()) {
-          ASSERT_TRUE(std::isfinite(h.t) && h.t >= b.rays[i].tmin) << v.scheme << " " << kernel_name(k);
+          ASSERT_TRUE(std::isfinite(h.t) && h.t >= b.rays[i].tmin) << v.scheme << " " << v.order << " " << kernel_name(k);
           ASSERT_LT(h.prim, bench.scene().num_triangles());
           ASSERT_TRUE(std::isfinite(h.u) && std::isfinite(h.v));
         } else {
@@ -644,7 +648,7 @@ TEST(MBVH, EveryKernelVariantRuns) {
                      : hits_match(h, ref[i]);
       }
       // The fast kernels are not robust, but on ordinary rays they agree almost everywhere.
-      EXPECT_GE(double(agree), 0.99 * double(hits.size())) << v.scheme << " " << kernel_name(k);
+      EXPECT_GE(double(agree), 0.99 * double(hits.size())) << v.scheme << " " << v.order << " " << kernel_name(k);
       if (k == TriKernel::watertight) {
         EXPECT_LE(hits.size() - agree, 1u) << v.scheme;
       }

@@ -20,8 +20,9 @@
 // 512x512, median of 3 (sort -> branching): sponza 0.81 -> 1.09, conference 1.23 -> 1.40,
 // dragon_100k 1.11 -> 1.33, stadium 1.02 -> 1.11, the held-out-shaped scene 1.19 -> 1.35; on
 // bounce:2 branching was 2-6% behind sort (docs/PERFORMANCE.md, session 8). The hint is the one
-// the Embree baselines pass as RTC_INTERSECT_CONTEXT_FLAG_COHERENT. The other kernels and
-// tri_width=4 always take the branching order.
+// the Embree baselines pass as RTC_INTERSECT_CONTEXT_FLAG_COHERENT. tri_width=4 always takes the
+// branching order; every triangle kernel (--kernel) takes the order chosen (until session 39 the
+// kernels other than watertight took the branching order whatever `order` said).
 // prefetch=auto (default) makes the sorted batches fetch the second-nearest entered child early
 // (ChildOrder::sort_prefetch) when the nodes and blocks exceed llc_mib (32: a Zen 3 CCX's L3; this
 // VM's sysconf/CPUID report 508 MiB, so the size is a parameter, not a query). bounce:2, one
@@ -45,9 +46,8 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
       : MBVHScheme(cfg, kDefaults, cfg.get_int("tri_width") == 4 ? 0 : 1),
         order_(parse_order_param(cfg.get_choice("order"))) {
     // Every option works or is refused: the sorted orders (and their prefetch) run on 8-wide
-    // blocks only (run() below), and tri_width=4 has 4-wide blocks everywhere, so `small` has
-    // nothing to choose. (The kernels other than watertight take the branching order too; that
-    // is not refused, since `table accuracy` runs one entry under every kernel.)
+    // blocks only (run() below), under every triangle kernel, and tri_width=4 has 4-wide blocks
+    // everywhere, so `small` has nothing to choose.
     const char* unsorted = cfg.get_int("tri_width") == 4 ? "tri_width=4 takes the branching order"
                            : order_ == OrderParam::branching ? "order=branching"
                                                              : nullptr;
@@ -72,7 +72,7 @@ class MBVH8Single final : public MBVHScheme<MBVH8Single, MBVHData<8, 4>, MBVHDat
       data_.visit([&](const auto& d) {
         constexpr TriKernel K = decltype(k)::value;
         constexpr int W = std::decay_t<decltype(d)>::kW;
-        if constexpr (W == 8 && K == TriKernel::watertight) {
+        if constexpr (W == 8) {
           if (sort && prefetch_) {
             mbvh_trace_rays<8, W, K, ChildOrder::sort_prefetch>(d, batch, range, hits, probe);
             return;

@@ -27,7 +27,7 @@ ParamSpecs mbvh_param_specs(const MBVHDefaults& d) {
 
 ParamSpec mbvh8_order_param() {
   return choice_param("order", "auto", {"auto", "sort", "branching"},
-                      "child order (ChildOrder, watertight 8-wide blocks): sort = sort_always, branching, "
+                      "child order (ChildOrder, 8-wide blocks): sort = sort_always, branching, "
                       "auto = branching for common-origin batches, sort_always otherwise");
 }
 
