@@ -187,9 +187,6 @@ void exact_td(const Ray& ray, Vec3 A, Vec3 B, Vec3 C, mpq_class& T, mpq_class& D
   T = qdot(qminus(A, ray.org), n);
   if (sgn(D) < 0) D = -D, T = -T;
 }
-void exact_td(const Ray& ray, const Scene& s, uint32_t prim, mpq_class& T, mpq_class& D) {
-  exact_td(ray, s.vertex(prim, 0), s.vertex(prim, 1), s.vertex(prim, 2), T, D);
-}
 
 // A candidate's exact T and D, formed the first time a comparison needs them and kept with the
 // candidate: the closest so far meets every later tie (a stack of coplanar, overlapping triangles
@@ -200,12 +197,15 @@ struct ExactTD {
     mpq_class T, D;
   };
   std::optional<Values> v;
-  const Values& need(const Ray& ray, const Scene& s, uint32_t prim) {
+  const Values& need(const Ray& ray, Vec3 A, Vec3 B, Vec3 C) {
     if (!v) {
       v.emplace();
-      exact_td(ray, s, prim, v->T, v->D);
+      exact_td(ray, A, B, C, v->T, v->D);
     }
     return *v;
+  }
+  const Values& need(const Ray& ray, const Scene& s, uint32_t prim) {
+    return need(ray, s.vertex(prim, 0), s.vertex(prim, 1), s.vertex(prim, 2));
   }
 };
 
@@ -235,27 +235,25 @@ void t_bounds(const Cand& c, double& lo, double& hi) {
   hi += std::fabs(hi) * 4 * kU;
 }
 
-// `known`: best's exact T and D where a tie already formed them (closest's ExactTD), so that they
+// `known`: best's ExactTD (closest's), whose T and D a tie may already have formed, so that they
 // are not formed twice.
-Hit finish(const Ray& ray, const Cand& best, Vec3 A, Vec3 B, Vec3 C, const ExactTD* known = nullptr) {
+Hit finish(const Ray& ray, const Cand& best, Vec3 A, Vec3 B, Vec3 C, ExactTD* known = nullptr) {
   if (best.prim == kNoHit) return Hit{};
   double lo, hi;
   t_bounds(best, lo, hi);
   float t;
   if (float(lo) == float(hi)) {
     t = float(lo);  // round to nearest is monotonic: every value in [lo, hi] rounds to it
-  } else if (known && known->v) {
-    t = round_to_float(mpq_class(known->v->T / known->v->D));
   } else {
-    mpq_class T, D;
-    exact_td(ray, A, B, C, T, D);
-    t = round_to_float(mpq_class(T / D));
+    ExactTD fresh;
+    const ExactTD::Values& e = (known ? *known : fresh).need(ray, A, B, C);
+    t = round_to_float(mpq_class(e.T / e.D));
   }
   t += 0.f;  // a rational zero has no sign: report +0 (-0 + 0 = +0)
   return Hit{t, best.prim, float(best.u), float(best.v)};
 }
 
-Hit finish_closest(const Ray& ray, const Scene& s, const Cand& best, const ExactTD* known = nullptr) {
+Hit finish_closest(const Ray& ray, const Scene& s, const Cand& best, ExactTD* known = nullptr) {
   if (best.prim == kNoHit) return Hit{};
   return finish(ray, best, s.vertex(best.prim, 0), s.vertex(best.prim, 1), s.vertex(best.prim, 2), known);
 }
