@@ -141,12 +141,21 @@ template <int N, int Oct = kAnyOctant>
   using S = simd::V<N>;
   const float* b = &nd.box[0][0];
   const uint32_t* row = Oct == kAnyOctant ? r.rows : kPlaneRows<N>[Oct].data();
-  const typename S::f rr[3] = {r.rx, r.ry, r.rz}, cn[3] = {r.cnx, r.cny, r.cnz}, cf[3] = {r.cfx, r.cfy, r.cfz};
   typename S::f n = r.tmin, f = S::set1(tfar);
-  for (int a = 0; a < 3; ++a) {
-    n = S::max(S::fma(S::load(b + row[a]), rr[a], cn[a]), n);
-    f = S::min(S::fma(S::load(b + row[3 + a]), rr[a], cf[a]), f);
-  }
+  // Unrolled by hand (each axis its own constants, no array): written as a loop, the profile-guided
+  // build kept it a loop wherever the training did not make it the hottest code — mbvh_rs's stream
+  // test and every parameter variant the training does not run (cwbvh_single:leaves=blocks) — with
+  // the per-axis constants stored to a stack array at every node and read back. Unrolled, mbvh_rs
+  // traced 1.04-1.13x faster (4 scenes, primary and bounce:2) and cwbvh_single:leaves=blocks
+  // 1.12-1.18x on primary rays; the trained loops unchanged (docs/PERFORMANCE.md, session 40).
+  const auto axis = [&](const typename S::f& rr, const typename S::f& cn, const typename S::f& cf, uint32_t near,
+                        uint32_t far) __attribute__((always_inline)) {
+    n = S::max(S::fma(S::load(b + near), rr, cn), n);
+    f = S::min(S::fma(S::load(b + far), rr, cf), f);
+  };
+  axis(r.rx, r.cnx, r.cfx, row[0], row[3]);
+  axis(r.ry, r.cny, r.cfy, row[1], row[4]);
+  axis(r.rz, r.cnz, r.cfz, row[2], row[5]);
   tn_out = n;
   return S::le(n, f);
 }
