@@ -7,7 +7,9 @@
 //
 // NaN semantics are part of the contract, because the slab test relies on them (see box_entry):
 // min(a, b) = a < b ? a : b and max(a, b) = a > b ? a : b, i.e. the SECOND operand when either is
-// NaN — what minps/maxps do, and what the scalar expressions compile to (minss/maxss). Compares
+// NaN — what minps/maxps do. V<1> issues minss/maxss itself: the expressions compile to them in a
+// plain build, but the profile-guided build turned them into branches where the training's rays
+// took one side (bvh_single's slab test: 2x slower on bounce rays; docs/PERFORMANCE.md, session 40). Compares
 // are ordered (false on NaN) except neq, which is unordered (true on NaN), as C++'s != is.
 // V<1>'s masks are bool, so scalar code keeps its branches; V<4>/V<8> masks are all-ones lanes.
 #pragma once
@@ -31,8 +33,8 @@ struct V<1> {
   static f sub(f a, f b) { return a - b; }
   static f mul(f a, f b) { return a * b; }
   static f div(f a, f b) { return a / b; }
-  static f min(f a, f b) { return a < b ? a : b; }
-  static f max(f a, f b) { return a > b ? a : b; }
+  static f min(f a, f b) { return _mm_cvtss_f32(_mm_min_ss(_mm_set_ss(a), _mm_set_ss(b))); }  // a < b ? a : b
+  static f max(f a, f b) { return _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(a), _mm_set_ss(b))); }  // a > b ? a : b
   static m and_(m a, m b) { return a && b; }
   static m or_(m a, m b) { return a || b; }
   static m andnot(m a, m b) { return !a && b; }  // ~a & b
