@@ -245,6 +245,27 @@ void check_lanes(const KernelCase& c) {
   EXPECT_GT(zero_edges, 10);    // ... and the double fallback of the edge functions
 }
 
+// simd.h's contract, on which the slab tests' NaN rule rests: min(a, b) = a < b ? a : b and
+// max(a, b) = a > b ? a : b bit for bit (the SECOND operand when either is NaN, and for +0 / -0) on
+// every lane count; V<1> issues minss/maxss itself (session 40), the others minps/maxps.
+template <int L>
+void check_min_max(float a, float b) {
+  using S = simd::V<L>;
+  alignas(32) float x[L], y[L], lo[L], hi[L];
+  for (int l = 0; l < L; ++l) x[l] = a, y[l] = b;
+  S::store(lo, S::min(S::load(x), S::load(y)));
+  S::store(hi, S::max(S::load(x), S::load(y)));
+  for (int l = 0; l < L; ++l) {
+    EXPECT_EQ(bits(lo[l]), bits(a < b ? a : b)) << L << " lanes: min(" << a << ", " << b << ")";
+    EXPECT_EQ(bits(hi[l]), bits(a > b ? a : b)) << L << " lanes: max(" << a << ", " << b << ")";
+  }
+}
+TEST(KernelLibrary, MinMaxTakeTheSecondOperandOnNaNAndZeros) {
+  const float v[] = {1.f, -2.f, 0.f, -0.f, INFINITY, -INFINITY, NAN, -NAN, 1e-40f, 3.5f};
+  for (float a : v)
+    for (float b : v) check_min_max<1>(a, b), check_min_max<4>(a, b), check_min_max<8>(a, b);
+}
+
 TEST(KernelLibrary, FourLanesMatchOneLaneBitForBit) { check_lanes<4>(grid_cases(5, 4000)); }
 TEST(KernelLibrary, EightLanesMatchOneLaneBitForBit) { check_lanes<8>(grid_cases(6, 4000)); }
 

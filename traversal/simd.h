@@ -33,8 +33,18 @@ struct V<1> {
   static f sub(f a, f b) { return a - b; }
   static f mul(f a, f b) { return a * b; }
   static f div(f a, f b) { return a / b; }
-  static f min(f a, f b) { return _mm_cvtss_f32(_mm_min_ss(_mm_set_ss(a), _mm_set_ss(b))); }  // a < b ? a : b
-  static f max(f a, f b) { return _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(a), _mm_set_ss(b))); }  // a > b ? a : b
+  // a < b ? a : b and a > b ? a : b as one instruction each (the intrinsics on _mm_set_ss would add
+  // a move that zeroes the upper lanes, on the slab test's dependency chain).
+  static f min(f a, f b) {
+    f r;
+    __asm__("vminss %2, %1, %0" : "=x"(r) : "x"(a), "x"(b));
+    return r;
+  }
+  static f max(f a, f b) {
+    f r;
+    __asm__("vmaxss %2, %1, %0" : "=x"(r) : "x"(a), "x"(b));
+    return r;
+  }
   static m and_(m a, m b) { return a && b; }
   static m or_(m a, m b) { return a || b; }
   static m andnot(m a, m b) { return !a && b; }  // ~a & b
