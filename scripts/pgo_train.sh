@@ -13,8 +13,9 @@
 # so each scheme's code is counted in proportion to its own work on rays like those it will be
 # timed on. Until session 40 only the schemes of the speed goals ran on the last two, the others
 # on stadium's 128x128 rays alone, and the profile-guided build made several of those slower than a
-# plain build (branches laid out for stadium's rays: bvh_partition 0.70x and bvh_single 0.73x on
-# conference's camera rays, kd_single 0.85x; docs/PERFORMANCE.md, session 40). Counts only steer
+# plain build (branches laid out for stadium's rays: bvh_single 0.60-0.67x on conference's camera
+# rays and 0.44-0.48x on bounce rays, bvh_partition 0.70-0.77x, kd_single 0.83x; with
+# simd::V<1>::min/max made branch-free, docs/PERFORMANCE.md, session 40). Counts only steer
 # code layout, inlining, unrolling and register allocation; code the training never reaches is
 # optimised as usual (-fprofile-partial-training).
 set -euo pipefail
