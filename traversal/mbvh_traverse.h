@@ -146,8 +146,9 @@ template <int N, int Oct = kAnyOctant>
   // build kept it a loop wherever the training did not make it the hottest code — mbvh_rs's stream
   // test and every parameter variant the training does not run (cwbvh_single:leaves=blocks) — with
   // the per-axis constants stored to a stack array at every node and read back. Unrolled, mbvh_rs
-  // traced 1.04-1.13x faster (4 scenes, primary and bounce:2) and cwbvh_single:leaves=blocks
-  // 1.12-1.18x on primary rays; the trained loops unchanged (docs/PERFORMANCE.md, session 40).
+  // traced 1.04-1.13x faster (4 scenes, primary and bounce:2) and cwbvh_single:full_top=100:
+  // leaves=blocks 1.13-1.23x on primary rays of sponza and spheres:2M (each against embree_single in
+  // its process); the trained loops unchanged (docs/PERFORMANCE.md, session 40).
   const auto axis = [&](const typename S::f& rr, const typename S::f& cn, const typename S::f& cf, uint32_t near,
                         uint32_t far) __attribute__((always_inline)) {
     n = S::max(S::fma(S::load(b + near), rr, cn), n);
