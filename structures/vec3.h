@@ -32,14 +32,28 @@ constexpr Vec3 cross(Vec3 a, Vec3 b) {
 }
 inline float length(Vec3 a) { return std::sqrt(dot(a, a)); }
 inline Vec3 normalize(Vec3 a) { return a / length(a); }
-// std::min(a, b) and std::max(a, b) exactly ((b < a) ? b : a and (a < b) ? b : a: minss/maxss
-// return their second operand unless the first is strictly below/above it, so NaNs and signed
-// zeros come out the same), but branch-free whatever the compiler's profile says: the
-// profile-guided build (scripts/build.sh) had turned them into compares and branches in
-// Scene::triangle_bounds, which mispredict on a mesh's vertices: thesis Table 1's refits ran
-// 2.2-3.6x slower than without the profile (docs/PERFORMANCE.md, session 34).
-inline float min_of(float a, float b) { return _mm_cvtss_f32(_mm_min_ss(_mm_set_ss(b), _mm_set_ss(a))); }
-inline float max_of(float a, float b) { return _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(b), _mm_set_ss(a))); }
+// minss(a, b) = a < b ? a : b and maxss(a, b) = a > b ? a : b, the SECOND operand when either is
+// NaN or both are zeros: one vminss/vmaxss each, whatever the compiler's profile says. The
+// profile-guided build (scripts/build.sh) had turned the ternaries into compares and branches laid
+// out for the training's data: in Scene::triangle_bounds, mispredicting on a mesh's vertices (thesis
+// Table 1's refits 2.2-3.6x slower, docs/PERFORMANCE.md, session 34), and in the single-ray slab
+// test (simd::V<1>::min/max, which are these; bvh_single 2x slower on bounce rays, session 40).
+// Inline asm rather than _mm_min_ss(_mm_set_ss(a), _mm_set_ss(b)): the intrinsics add a move that
+// zeroes the upper lanes, on the slab test's dependency chain.
+inline float minss(float a, float b) {
+  float r;
+  __asm__("vminss %2, %1, %0" : "=x"(r) : "x"(a), "x"(b));
+  return r;
+}
+inline float maxss(float a, float b) {
+  float r;
+  __asm__("vmaxss %2, %1, %0" : "=x"(r) : "x"(a), "x"(b));
+  return r;
+}
+// std::min(a, b) and std::max(a, b) exactly ((b < a) ? b : a and (a < b) ? b : a, so NaNs and
+// signed zeros come out the same), branch-free.
+inline float min_of(float a, float b) { return minss(b, a); }
+inline float max_of(float a, float b) { return maxss(b, a); }
 inline Vec3 vmin(Vec3 a, Vec3 b) { return {min_of(a.x, b.x), min_of(a.y, b.y), min_of(a.z, b.z)}; }
 inline Vec3 vmax(Vec3 a, Vec3 b) { return {max_of(a.x, b.x), max_of(a.y, b.y), max_of(a.z, b.z)}; }
 inline bool is_finite(Vec3 a) { return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z); }

@@ -263,7 +263,13 @@ void check_min_max(float a, float b) {
 TEST(KernelLibrary, MinMaxTakeTheSecondOperandOnNaNAndZeros) {
   const float v[] = {1.f, -2.f, 0.f, -0.f, INFINITY, -INFINITY, NAN, -NAN, 1e-40f, 3.5f};
   for (float a : v)
-    for (float b : v) check_min_max<1>(a, b), check_min_max<4>(a, b), check_min_max<8>(a, b);
+    for (float b : v) {
+      check_min_max<1>(a, b), check_min_max<4>(a, b), check_min_max<8>(a, b);
+      // The structures' branch-free std::min/std::max (structures/vec3.h, the same instructions with
+      // the operands swapped): std's NaN and signed-zero results, bit for bit.
+      EXPECT_EQ(bits(min_of(a, b)), bits(std::min(a, b))) << "min_of(" << a << ", " << b << ")";
+      EXPECT_EQ(bits(max_of(a, b)), bits(std::max(a, b))) << "max_of(" << a << ", " << b << ")";
+    }
 }
 
 TEST(KernelLibrary, FourLanesMatchOneLaneBitForBit) { check_lanes<4>(grid_cases(5, 4000)); }

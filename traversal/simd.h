@@ -17,6 +17,8 @@
 
 #include <cstdint>
 
+#include "structures/vec3.h"
+
 namespace tb::simd {
 
 template <int L>
@@ -33,18 +35,10 @@ struct V<1> {
   static f sub(f a, f b) { return a - b; }
   static f mul(f a, f b) { return a * b; }
   static f div(f a, f b) { return a / b; }
-  // a < b ? a : b and a > b ? a : b as one instruction each (the intrinsics on _mm_set_ss would add
-  // a move that zeroes the upper lanes, on the slab test's dependency chain).
-  static f min(f a, f b) {
-    f r;
-    __asm__("vminss %2, %1, %0" : "=x"(r) : "x"(a), "x"(b));
-    return r;
-  }
-  static f max(f a, f b) {
-    f r;
-    __asm__("vmaxss %2, %1, %0" : "=x"(r) : "x"(a), "x"(b));
-    return r;
-  }
+  // a < b ? a : b and a > b ? a : b as one vminss/vmaxss each (structures/vec3.h: not left to the
+  // compiler's profile).
+  static f min(f a, f b) { return minss(a, b); }
+  static f max(f a, f b) { return maxss(a, b); }
   static m and_(m a, m b) { return a && b; }
   static m or_(m a, m b) { return a || b; }
   static m andnot(m a, m b) { return !a && b; }  // ~a & b
