@@ -270,6 +270,14 @@ int main(int argc, char** argv) {
                       ->excludes(rays_workload);
   rays->add_option("--spp", pt_spp, "samples per pixel of --pathtrace")->check(CLI::Range(1, 4096))->needs(rays_pt);
   rays->add_option("--view", ro.view, "camera view (1-3, or as many as scenes.json lists)")->check(view_range);
+  // The camera `table divergence` traces by default (thesis Tables 2-4), for a ray file of the same
+  // rays (scripts/divergence_counts.sh counts them under callgrind), built-in scenes included.
+  std::string rays_camera = "view";
+  rays->add_option("--camera", rays_camera,
+                   "view = the view's own field of view; thesis = the camera of thesis Tables 2-4 (adjacent rays "
+                   "0.034 deg apart at 1280 pixels wide: `table divergence`'s default)")
+      ->check(CLI::IsMember({"view", "thesis"}))
+      ->excludes(rays_pt);
   rays->add_option("--out", rays_out, "ray file to write")->required()->check(kOutputFile);
 
   std::string scheme_arg, rays_in, hits_out;
@@ -281,6 +289,7 @@ int main(int argc, char** argv) {
   trace->add_option("--rays", rays_in, "ray file to read")->required();
   trace->add_option("--hits", hits_out, "hit file to write")->check(kOutputFile);
   add_cache(trace, "with --csv: add run's simulated cache columns (one instrumented trace)");
+  trace->add_flag("--stats", ro.stats, "with --csv: add run's node/leaf/triangle counts per ray and rays per visited node");
 
   ImageOptions io;
   auto* image = app.add_subcommand("image", "Per-pixel heat map of one scheme's traversal cost on a workload -> PNG");
@@ -362,6 +371,7 @@ int main(int argc, char** argv) {
     if (*rays) check_files(scene_inputs(scene_arg), {{"--out", rays_out}});
     if (*image) check_files(scene_inputs(scene_arg), {{"--out", io.out}});
     if (*trace) {
+      if (ro.stats && csv_path.empty()) throw InputError("trace: --stats needs --csv (its columns go there)");
       std::vector<FileArg> in = scene_inputs(scene_arg), out = csv_outputs(csv_path);
       in.push_back({"--rays", rays_in});
       out.insert(out.begin(), {"--hits", hits_out});
@@ -449,6 +459,12 @@ int main(int argc, char** argv) {
     if (*rays) {
       WorkloadSpec spec = parse_workload(workload_arg);
       if (view_given) check_view_applies(spec);
+      if (rays_camera == "thesis") {
+        if (!from_camera_pixels(spec))
+          throw InputError("--camera thesis: workload '" + spec.name() +
+                           "' is not traced through the camera's pixels: run it without --camera");
+        spec.hfov_deg = thesis_hfov_deg();
+      }
       spec.width = ro.width, spec.height = ro.height, spec.view = ro.view, spec.seed = ro.seed;
       write_rays(rays_out, bench.rays(spec));
       return 0;

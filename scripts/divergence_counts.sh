@@ -3,17 +3,19 @@
 # adjacent rays 0.034 deg * D apart, 16x16 packets), counted by callgrind: the work x rate split of
 # results/THESIS.md's "D = 8 keeps <= 31% of D = 1" checks.
 #
-#   scripts/divergence_counts.sh SCENE.obj [OUT.csv [STATS.csv]]
+#   scripts/divergence_counts.sh SCENE [OUT.csv [STATS.csv]]
+#     SCENE a scene file or a built-in scene name (room, stadium)
 #     OUT.csv default results/<scene>/divergence_counts.csv, STATS.csv results/<scene>/divergence_stats.csv
 #   SCHEMES=bvh_ranged,mbvh4_single  DS=1,8  VIEWS=1,2,3  STRIDE=8  TIME_REPS=7  JOBS=1
-#   STEPS=counts,stats (stats: `travbench run --stats` on the same rays, the full 1280x800 image, one
-#   process per view: nodes, leaves, triangles per ray, rays per visited node, range per node)
+#   STEPS=counts,stats (stats: `travbench trace --stats` on the same rays, the full 1280x800 image, one
+#   process per view, D and scheme: nodes, leaves, triangles per ray, rays per visited node, range per node)
 #   TB=<a non-native travbench> (default: builds build-valgrind/ as scripts/instruction_counts.sh does)
 #
-# The thesis camera without a C++ change: `travbench rays` writes divergence:D of the scene's views at
-# 1280x800 with the views' vfov_deg replaced, in a scenes.json beside a link to the scene file, by the
-# thesis camera's vertical fov (2 atan(tan(hfov/2) 800/1280) with hfov = thesis_hfov_deg() =
-# 2 atan(1280 tan(0.017 deg)), docs/WORKLOADS.md), so the rays are those `table divergence` traces.
+# The rays: `travbench rays --camera thesis` writes divergence:D of the scene's views at 1280x800 on
+# the camera of thesis Tables 2-4 (hfov = thesis_hfov_deg() = 2 atan(1280 tan(0.017 deg)),
+# docs/WORKLOADS.md), the rays `table divergence` traces by default. (Until session 41 the script
+# replaced the views' vfov in a scenes.json beside a link to the scene file instead, which needed a
+# scene file; the same rays bit for bit, checked on conference: results/README.md.)
 # The subsample: every STRIDE-th 16x16 packet of the file (tile order), whole packets, so each
 # packet keeps its rays, its spacing and its tile geometry; a packet's instruction count does not
 # depend on the packets traced before it, so the subsample's instructions per ray estimate the full
@@ -22,8 +24,8 @@
 # binary natively on the same subsample (TIME_REPS reps, 1 thread) -> instructions_per_ns.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-SCENE=${1:?usage: scripts/divergence_counts.sh SCENE.obj [OUT.csv]}
-[ -f "$SCENE" ] || { echo "divergence_counts: no scene file '$SCENE'" >&2; exit 2; }
+SCENE=${1:?usage: scripts/divergence_counts.sh SCENE [OUT.csv [STATS.csv]]}
+[[ "$SCENE" != */* || -f "$SCENE" ]] || { echo "divergence_counts: no scene file '$SCENE'" >&2; exit 2; }
 name=$(basename "$SCENE"); name=${name%.*}
 OUT=${2:-results/$name/divergence_counts.csv}
 STATS_OUT=${3:-results/$name/divergence_stats.csv}
@@ -39,31 +41,14 @@ if [ -z "${TB:-}" ]; then
 fi
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-scene_abs=$(realpath "$SCENE")
-ln -s "$scene_abs" "$work/$(basename "$SCENE")"
-json=$(dirname "$scene_abs")/scenes.json
-[ -f "$json" ] || { echo "divergence_counts: no scenes.json beside $SCENE (the views)" >&2; exit 2; }
-/usr/bin/python3 - "$json" "$(basename "$SCENE")" "$work/scenes.json" <<'EOF'
-import json, math, sys
-d = json.load(open(sys.argv[1]))
-entries = [e for e in (d.values() if isinstance(d, dict) else d) if isinstance(e, dict) and e.get("file") == sys.argv[2]]
-if not entries or "views" not in entries[0]:
-    sys.exit(f"divergence_counts: {sys.argv[1]} lists no views for {sys.argv[2]}")
-hfov = 2 * math.atan(1280 * math.tan(0.5 * 0.034 * math.pi / 180))
-vfov = 2 * math.atan(math.tan(0.5 * hfov) * 800 / 1280) * 180 / math.pi
-e = entries[0]
-for v in e["views"]:
-    v["vfov_deg"] = vfov
-json.dump([e], open(sys.argv[3], "w"), indent=1)
-EOF
 IFS=, read -r -a scheme_list <<<"$SCHEMES"
 IFS=, read -r -a d_list <<<"$DS"
 IFS=, read -r -a view_list <<<"$VIEWS"
-scene_link="$work/$(basename "$SCENE")"
 for v in "${view_list[@]}"; do
   for d in "${d_list[@]}"; do
     f="$work/v${v}_d$d"
-    $TB rays --scene "$scene_link" --workload "divergence:$d" --width 1280 --height 800 --view "$v" --out "$f.full.rays" 2>"$f.log" ||
+    $TB rays --scene "$SCENE" --workload "divergence:$d" --width 1280 --height 800 --view "$v" --camera thesis \
+      --out "$f.full.rays" 2>"$f.log" ||
       { cat "$f.log" >&2; exit 1; }
     /usr/bin/python3 - "$f.full.rays" "$f.rays" "$STRIDE" "$d" <<'EOF'
 import math, struct, sys
@@ -86,24 +71,33 @@ packets = [raw[24 + i * rec: 24 + (i + 1) * rec] for i in range(0, count // psiz
 with open(sys.argv[2], "wb") as out:
     out.write(raw[:8] + struct.pack("<QII", len(packets) * psize, psize, 0) + b"".join(packets))
 EOF
-    rm "$f.full.rays"
   done
 done
 if [[ ",$STEPS," == *,stats,* ]]; then
   mkdir -p "$(dirname "$STATS_OUT")"
   for v in "${view_list[@]}"; do
-    echo "divergence_counts: --stats, view $v, full image" >&2
-    $TB run --scene "$scene_link" --schemes "$SCHEMES" --workloads "$(printf 'divergence:%s,' "${d_list[@]}" | sed 's/,$//')" \
-      --width 1280 --height 800 --view "$v" --stats --reps 1 --threads 1 --csv "$work/stats_v$v.csv" >/dev/null 2>"$work/stats.log" ||
-      { cat "$work/stats.log" >&2; exit 1; }
+    for d in "${d_list[@]}"; do
+      for s in "${scheme_list[@]}"; do
+        echo "divergence_counts: --stats, $s view $v D=$d, full image" >&2
+        $TB trace --scene "$SCENE" --scheme "$s" --rays "$work/v${v}_d$d.full.rays" --stats --reps 1 --threads 1 \
+          --csv "$work/stats_v${v}_d$d@$s.csv" >/dev/null 2>"$work/stats.log" || { cat "$work/stats.log" >&2; exit 1; }
+      done
+    done
   done
-  /usr/bin/python3 - "$work" "$STATS_OUT" "$VIEWS" <<'EOF'
+  /usr/bin/python3 - "$work" "$STATS_OUT" "$VIEWS" "$DS" "$SCHEMES" "$name" <<'EOF'
 import csv, os, sys
-work, out, views = sys.argv[1], sys.argv[2], sys.argv[3].split(",")
+work, out = sys.argv[1], sys.argv[2]
+views, ds, schemes = (a.split(",") for a in sys.argv[3:6])
 keep = ("scene", "view", "workload", "scheme", "rays", "mrays_median", "mismatch_rate", "nodes_per_ray", "leaves_per_ray",
         "tris_per_ray", "rays_per_node", "rays_per_leaf", "range_per_node", "range_per_leaf")
-rows = [{k: r[k] for k in keep} for v in views
-        for r in csv.DictReader(l for l in open(os.path.join(work, f"stats_v{v}.csv")) if not l.startswith("#"))]
+rows = []
+for v in views:
+    for d in ds:
+        for s in schemes:
+            for r in csv.DictReader(l for l in open(os.path.join(work, f"stats_v{v}_d{d}@{s}.csv")) if not l.startswith("#")):
+                # trace labels the cell by its ray file: name the view and workload the rays were made for
+                r.update(scene=sys.argv[6], view=v, workload=f"divergence:{d}")
+                rows.append({k: r[k] for k in keep})
 with open(out, "w", newline="") as fh:
     w = csv.DictWriter(fh, fieldnames=list(keep))
     w.writeheader()
@@ -117,7 +111,7 @@ count() {
   echo "divergence_counts: $s view $v D=$d on $name" >&2
   valgrind --tool=callgrind --cache-sim=yes --branch-sim=yes "--LL=${LL:-33554432,16,64}" --collect-atstart=no \
     --toggle-collect='tb::measure(*' --callgrind-out-file="$f@$s.cg" -q \
-    $TB trace --scene "$scene_link" --scheme "$s" --rays "$f.rays" --reps 1 --threads 1 --csv "$f@$s.csv" \
+    $TB trace --scene "$SCENE" --scheme "$s" --rays "$f.rays" --reps 1 --threads 1 --csv "$f@$s.csv" \
     >/dev/null 2>"$f@$s.log" || { cat "$f@$s.log" >&2; return 1; }
 }
 pids=()
@@ -135,7 +129,7 @@ for v in "${view_list[@]}"; do
   for d in "${d_list[@]}"; do
     for s in "${scheme_list[@]}"; do
       f="$work/v${v}_d$d"
-      $TB trace --scene "$scene_link" --scheme "$s" --rays "$f.rays" --reps "$TIME_REPS" --threads 1 --csv "$f@$s.time.csv" \
+      $TB trace --scene "$SCENE" --scheme "$s" --rays "$f.rays" --reps "$TIME_REPS" --threads 1 --csv "$f@$s.time.csv" \
         >/dev/null 2>"$f@$s.log" || { cat "$f@$s.log" >&2; exit 1; }
     done
   done

@@ -98,6 +98,11 @@ TEST_F(BadInput, OptionValuesAreValidatedAndNamed) {
       // A view given to workloads no view changes would label their rows with it: refused.
       {"run --scene room --workloads primary,rnd2 --view 2" + csv, {"--view", "'rnd2'", "without --view"}},
       {"rays --scene room --workload hard:edges --view 2 --out " + path("r.bin"), {"--view", "'hard:edges'"}},
+      // The thesis camera changes only the rays traced through the camera's pixels.
+      {"rays --scene room --workload rnd2 --camera thesis --out " + path("r.bin"), {"--camera thesis", "'rnd2'"}},
+      {rays + " --camera fisheye", {"--camera"}},
+      {"trace --scene room --scheme bvh_single --rays " + path("r.bin") + " --stats --hits " + path("h.bin"),
+       {"--stats needs --csv"}},
       {"run --scene room --workloads divergence:0" + csv, {"--workloads", "divergence:0"}},
       {"run --scene room --workloads divergence:4096" + csv, {"--workloads", "divergence"}},
       {"run --scene room --workloads primary,bounce:0" + csv, {"--workloads", "bounce:0"}},

@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <sstream>
 
@@ -20,6 +21,7 @@
 #include "harness/records.h"
 #include "harness/sweep.h"
 #include "test_util.h"
+#include "workloads/ray_file.h"
 
 namespace tb {
 namespace {
@@ -131,6 +133,26 @@ TEST(CLI, RaysAndTraceRoundTrip) {
   const Result t = travbench("trace --scene room --scheme bvh_single --rays " + rays + " --hits " + hits);
   EXPECT_EQ(t.code, 0) << t.out;
   EXPECT_GT(std::filesystem::file_size(hits), 16u);
+  std::filesystem::remove_all(dir);
+}
+
+// `rays --camera thesis` writes the rays `table divergence` traces by default (thesis Tables 2-4's
+// camera), for a built-in scene too; `--camera view` (the default) the view's own.
+TEST(CLI, RaysOnTheThesisCameraAreTheDivergenceTablesRays) {
+  const auto dir = test::temp_dir("cli_rays_camera");
+  const std::string thesis = (dir / "t.bin").string(), view = (dir / "v.bin").string();
+  const std::string args = "rays --scene room --workload divergence:8 --width 64 --height 32 --view 2 --out ";
+  ASSERT_EQ(travbench(args + thesis + " --camera thesis").code, 0);
+  ASSERT_EQ(travbench(args + view).code, 0);
+  Bench bench(make_builtin_scene("room"));
+  WorkloadSpec spec = parse_workload("divergence:8");
+  spec.width = 64, spec.height = 32, spec.view = 1, spec.hfov_deg = thesis_hfov_deg();
+  const RayBatch want = primary_rays(bench.scene(), spec, 8.f), got = read_rays(thesis), own = read_rays(view);
+  ASSERT_EQ(got.size(), want.size());
+  EXPECT_EQ(std::memcmp(got.rays.data(), want.rays.data(), want.size() * sizeof(Ray)), 0);
+  EXPECT_EQ(got.packet_begin, want.packet_begin);
+  ASSERT_EQ(own.size(), want.size());
+  EXPECT_NE(std::memcmp(own.rays.data(), want.rays.data(), want.size() * sizeof(Ray)), 0);
   std::filesystem::remove_all(dir);
 }
 
