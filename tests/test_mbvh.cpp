@@ -268,6 +268,45 @@ TEST(MBVH, TinyScenes) {
   }
 }
 
+// An axis-parallel ray culls on the axes it does not move along (kernels.h's stand-in for R = inf,
+// session 41): along +x or -x (the other components +0 or -0) it enters only the children whose
+// boxes hold its line — flat ones through it included — once tfar is finite. Before, those axes were
+// left out and it entered every child its x range overlaps (the MBVH schemes traced hard:axis
+// 200-3000x slower than bvh_single).
+TEST(MBVH, AxisParallelRayCullsOffItsLine) {
+  enable_ftz_daz();
+  // Beside the line by 0.6 or more: above the stand-in's tolerance 24 u (K + |o|) (0.29 at 1e5).
+  for (float offset : {0.f, 1e5f, -1e5f}) {
+    for (int sign : {1, -1}) {
+      MBVHNode<8> nd;
+      float bound[3] = {0, 0, 0};
+      int want = 0;
+      for (int i = 0; i < 8; ++i) {
+        // Child i spans x in [i, i + 1]; odd children lie beside the line y = z = 0.5 (by 1 to 1.7
+        // in y or z), even ones hold it: child 2 is flat in y at 0.5, child 4 in z.
+        const float dy = i % 4 == 1 ? 1.f + 0.1f * float(i) : 0.f, dz = i % 4 == 3 ? -1.f - 0.1f * float(i) : 0.f;
+        AABB b{Vec3{float(i), 0.f + dy, 0.f + dz}, Vec3{float(i) + 1.f, 1.f + dy, 1.f + dz}};
+        if (i == 2) b.lo.y = b.hi.y = 0.5f;
+        if (i == 4) b.lo.z = b.hi.z = 0.5f;
+        for (int a = 0; a < 3; ++a) {
+          b.lo[a] += offset, b.hi[a] += offset;
+          nd.box[a][i] = b.lo[a], nd.box[3 + a][i] = b.hi[a];
+          bound[a] = std::max({bound[a], std::fabs(b.lo[a]), std::fabs(b.hi[a])});
+        }
+        nd.ref[i] = 0;
+        if (i % 2 == 0) want |= 1 << i;
+      }
+      nd.num_children = 8;
+      const Vec3 o{offset + (sign > 0 ? -1.f : 9.f), offset + 0.5f, offset + 0.5f};
+      const Vec3 d{float(sign), sign > 0 ? 0.f : -0.f, -0.f};
+      const RayCtx rc(Ray{o, 0.f, d, 20.f});
+      const NodeRay<8> nr(rc, 0.f, bound);
+      __m256 tn;
+      EXPECT_EQ(_mm256_movemask_ps(box_test<8>(nd, nr, 20.f, tn)), want) << "offset " << offset << " sign " << sign;
+    }
+  }
+}
+
 // The fused node test (box_test: kernels.h's FusedPlanes, one fma per plane with the per-ray
 // absolute bound) against long-double distances: every child whose exact interval
 // [max(tmin, near), min(tfar, far)] is non-empty must be entered, with an entry distance at or

@@ -157,26 +157,55 @@ template <int L, bool kPadRcp>
 // second-order terms), bounds it. A caller with roundings of its own (the compressed BVH's decode)
 // passes larger factors kK, ko for K and |o|. An axis is left out (r = NaN, c = 0: every t of that
 // axis is NaN, which the NaN-skipping max/min of the node tests ignore — conservative) where R = 0
-// (|d| > 2^126), R = inf (d = 0 or denormal), R or o is NaN, or E > 2^100 (so |P r|, |c| <= 2^123
-// stay finite). What it costs: along an axis the box grows by E / R ~ u (2 K + 3 |o|), a few float
-// ulps of the scene's coordinates, where Ize's pad grows the far distance by 6 u t; an
-// axis-parallel ray (d = 0 exactly) does not use that axis to cull; and a box with a face in the
-// plane of the closest hit (coplanar walls, spatial-split pieces of one floor) is entered, where
-// Ize's unpadded near distance ties with the hit and usually culls it: 2.6% more leaves on
-// stadium bounce:2 (docs/PERFORMANCE.md, session 13, also for a form with a relative pad instead
-// of K: fewer extra leaves, three more per-ray vectors, slower).
+// (|d| > 2^126), R or o is NaN, or E > 2^100 (so |P r|, |c| <= 2^123 stay finite), and where R = inf
+// (d = 0) has no stand-in (below). What it costs: along an axis the box grows by E / R ~ u (2 K + 3 |o|), a few float
+// ulps of the scene's coordinates, where Ize's pad grows the far distance by 6 u t; and a box with a
+// face in the plane of the closest hit (coplanar walls, spatial-split pieces of one floor) is
+// entered, where Ize's unpadded near distance ties with the hit and usually culls it: 2.6% more
+// leaves on stadium bounce:2 (docs/PERFORMANCE.md, session 13, also for a form with a relative pad
+// instead of K: fewer extra leaves, three more per-ray vectors, slower).
+//
+// An axis the ray does not move along (d = +-0, so R = inf) is not left out (session 41: it was,
+// and then only the other axes culled: an axis-parallel ray entered every box its one moving axis
+// overlaps, and the MBVH schemes traced hard:axis 200-3000x slower than bvh_single). The ray's
+// coordinate there is o for every t, so the box is entered only if lo <= o <= hi; the test keeps
+// its form with a finite stand-in r0 = copysign(R0, inv) and bound E0, chosen from
+//   W >= K + |o| (so |P - o| <= W),  Tm >= every |T| on the axes the ray moves along
+//   (plane_distance_bound: (K + |o|) R (1 + 2^-20)),  E0 = 4 Tm,  R0 = Tm / (4 u W) = E0 / (16 u W):
+// the two fmas err by at most 2 u (W R0 + E0)(1 + u) < E0 / 7 (the compressed node test's bound,
+// 6.04 u Z + 4.02 u E with Z <= W R0, by < 0.38 E0), so
+//   lo <= o: every near distance is < 0 <= tmin (no constraint);
+//   hi >= o: every far distance is > 2 Tm, beyond every distance at which the box is entered (at
+//            most the largest distance on a moving axis, <= Tm), so no box the ray enters is culled;
+//   lo - o > 24 u W: the near distance is > Tm >= any hit distance, so once the ray has a hit the
+//            box is culled (before one, with tfar = inf, it is entered, as in exact arithmetic);
+//   hi - o < -24 u W: the far distance is < 0: culled.
+// |P r0| <= W R0 = Tm / (4 u) and |c| stay finite for Tm <= 2^100; outside 2^-100 <= Tm <= 2^100,
+// for W = 0 and for R0 = inf the axis is left out as before (r = NaN). A denormal d also reads as
+// 0 here (DAZ); traced rays have none (structures/vec3.h).
 //
 // One axis of L rays (or the three axes of one ray in lanes 0..2 of L = 4: then lane 3 must
 // have inv = 0, which leaves it out): r, c_near and c_far from the origin o, the reciprocal
-// direction inv and the coordinate bound K.
+// direction inv, the coordinate bound K and the ray's Tm (plane_distance_bound, the max over its
+// three axes).
 template <int L>
 struct FusedPlanes {
   typename simd::V<L>::f r, cn, cf;
 };
+// (K + |o|) R (1 + 2^-20) >= |(P - o) / d| for every plane |P| <= K, on lanes whose axis the ray moves
+// along (0 < R < inf); 0 on the others.
+template <int L>
+[[gnu::always_inline]] inline typename simd::V<L>::f plane_distance_bound(typename simd::V<L>::f o, typename simd::V<L>::f inv,
+                                                                          typename simd::V<L>::f K) {
+  using S = simd::V<L>;
+  const typename S::f R = S::abs(inv);
+  const typename S::m moves = S::and_(S::gt(R, S::zero()), S::lt(R, S::set1(INFINITY)));
+  return S::select(moves, S::mul(S::mul(S::add(K, S::abs(o)), R), S::set1(1.f + 0x1p-20f)));
+}
 template <int L>
 [[gnu::always_inline]] inline FusedPlanes<L> fused_planes(typename simd::V<L>::f o, typename simd::V<L>::f inv,
-                                                         typename simd::V<L>::f K, float kK = 2.02f * kUlp,
-                                                         float ko = 3.03f * kUlp) {
+                                                         typename simd::V<L>::f K, typename simd::V<L>::f Tm,
+                                                         float kK = 2.02f * kUlp, float ko = 3.03f * kUlp) {
   using S = simd::V<L>;
   const typename S::f R = S::abs(inv);
   const typename S::f Z = S::mul(S::fma(K, S::set1(kK), S::mul(S::abs(o), S::set1(ko))), R);
@@ -184,14 +213,26 @@ template <int L>
   // Used: 0 < R and E <= 2^100 (false for R = inf or NaN, o NaN, and the overflow case).
   const typename S::m use = S::and_(S::gt(R, S::zero()), S::le(E, S::set1(0x1p100f)));
   const typename S::f no = S::sub(S::zero(), o);
-  return {S::blendv(S::set1(NAN), inv, use), S::select(use, S::fma(no, inv, S::sub(S::zero(), E))),
-          S::select(use, S::fma(no, inv, E))};
+  // The axes the ray does not move along (R = inf), with the stand-ins above.
+  const typename S::f W = S::mul(S::add(K, S::abs(o)), S::set1(1.f + 0x1p-20f));
+  const typename S::f E0 = S::mul(Tm, S::set1(4.f));
+  const typename S::f R0 = S::div(Tm, S::mul(W, S::set1(4.f * kUlp)));
+  const typename S::m fixed = S::and_(
+      S::and_(S::eq(R, S::set1(INFINITY)), S::and_(S::ge(Tm, S::set1(0x1p-100f)), S::le(Tm, S::set1(0x1p100f)))),
+      S::and_(S::gt(W, S::zero()), S::lt(R0, S::set1(INFINITY))));
+  const typename S::f r0 = S::or_(S::and_(inv, S::set1(-0.f)), R0);  // copysign(R0, inv): the octant's sign
+  return {S::blendv(S::blendv(S::set1(NAN), inv, use), r0, fixed),
+          S::blendv(S::select(use, S::fma(no, inv, S::sub(S::zero(), E))), S::fma(no, r0, S::sub(S::zero(), E0)), fixed),
+          S::blendv(S::select(use, S::fma(no, inv, E)), S::fma(no, r0, E0), fixed)};
 }
 // The three axes of one ray, in lanes 0..2.
 inline FusedPlanes<4> fused_planes(Vec3 org, Vec3 inv, const float bound[3], float kK = 2.02f * kUlp,
                                    float ko = 3.03f * kUlp) {
-  return fused_planes<4>(_mm_setr_ps(org.x, org.y, org.z, 0.f), _mm_setr_ps(inv.x, inv.y, inv.z, 0.f),
-                         _mm_setr_ps(bound[0], bound[1], bound[2], 0.f), kK, ko);
+  using S = simd::V<4>;
+  const __m128 o = _mm_setr_ps(org.x, org.y, org.z, 0.f), in = _mm_setr_ps(inv.x, inv.y, inv.z, 0.f);
+  const __m128 K = _mm_setr_ps(bound[0], bound[1], bound[2], 0.f);
+  const __m128 Tm = S::set1(-S::hmin(S::sub(S::zero(), plane_distance_bound<4>(o, in, K))));  // the max of the lanes
+  return fused_planes<4>(o, in, K, Tm, kK, ko);
 }
 
 // The slab test for one ray: the entry distance or +inf on a miss. tfar is the current closest

@@ -143,8 +143,14 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
     __m256 nd[16];  // this group's node fields (rows), transposed below; 11-15 unused
     {
       const __m256 o[3] = {ox, oy, oz}, in[3] = {ix, iy, iz};
+      const __m256 K[3] = {_mm256_set1_ps(bound[0]), _mm256_set1_ps(bound[1]), _mm256_set1_ps(bound[2])};
+      // Each ray's largest plane distance on the axes it moves along (kernels.h: the stand-in of an
+      // axis it does not move along needs it).
+      const __m256 Tm = _mm256_max_ps(plane_distance_bound<8>(o[0], in[0], K[0]),
+                                      _mm256_max_ps(plane_distance_bound<8>(o[1], in[1], K[1]),
+                                                    plane_distance_bound<8>(o[2], in[2], K[2])));
       for (int a = 0; a < 3; ++a) {
-        const FusedPlanes<8> p = fused_planes<8>(o[a], in[a], _mm256_set1_ps(bound[a]));
+        const FusedPlanes<8> p = fused_planes<8>(o[a], in[a], K[a], Tm);
         nd[kNR + a] = p.r, nd[kNCN + a] = p.cn, nd[kNCF + a] = p.cf;
       }
       nd[kNTmin] = _mm256_load_ps(v.tmin + k);
