@@ -144,15 +144,18 @@ inline void prepare(const Rays& v, uint32_t n, const float bound[3]) {
     {
       const __m256 o[3] = {ox, oy, oz}, in[3] = {ix, iy, iz};
       const __m256 K[3] = {_mm256_set1_ps(bound[0]), _mm256_set1_ps(bound[1]), _mm256_set1_ps(bound[2])};
-      // Each ray's largest plane distance on the axes it moves along (kernels.h: the stand-in of an
-      // axis it does not move along needs it).
-      const __m256 Tm = _mm256_max_ps(plane_distance_bound<8>(o[0], in[0], K[0]),
-                                      _mm256_max_ps(plane_distance_bound<8>(o[1], in[1], K[1]),
-                                                    plane_distance_bound<8>(o[2], in[2], K[2])));
-      for (int a = 0; a < 3; ++a) {
-        const FusedPlanes<8> p = fused_planes<8>(o[a], in[a], K[a], Tm);
-        nd[kNR + a] = p.r, nd[kNCN + a] = p.cn, nd[kNCF + a] = p.cf;
+      FusedPlanes<8> p[3];
+      for (int a = 0; a < 3; ++a) p[a] = fused_planes<8>(o[a], in[a], K[a]);
+      // Rays that do not move along an axis (kernels.h: still_axes) need each ray's largest plane
+      // distance on the axes it moves along.
+      if (_mm256_movemask_ps(_mm256_or_ps(still_lanes<8>(ix), _mm256_or_ps(still_lanes<8>(iy), still_lanes<8>(iz)))))
+          [[unlikely]] {
+        const __m256 Tm = _mm256_max_ps(plane_distance_bound<8>(o[0], in[0], K[0]),
+                                        _mm256_max_ps(plane_distance_bound<8>(o[1], in[1], K[1]),
+                                                      plane_distance_bound<8>(o[2], in[2], K[2])));
+        for (int a = 0; a < 3; ++a) still_axes<8>(p[a], o[a], in[a], K[a], Tm);
       }
+      for (int a = 0; a < 3; ++a) nd[kNR + a] = p[a].r, nd[kNCN + a] = p[a].cn, nd[kNCF + a] = p[a].cf;
       nd[kNTmin] = _mm256_load_ps(v.tmin + k);
       nd[kNOct] = _mm256_castsi256_ps(oct);
       for (int f = kNOct + 1; f < 16; ++f) nd[f] = zero;
