@@ -177,9 +177,10 @@ template <int L, bool kPadRcp>
 //   lo <= o: every near distance is < 0 <= tmin (no constraint);
 //   hi >= o: every far distance is > 2 Tm, beyond every distance at which the box is entered (at
 //            most the largest distance on a moving axis, <= Tm), so no box the ray enters is culled;
-//   lo - o > 24 u W: the near distance is > Tm >= any hit distance, so once the ray has a hit the
-//            box is culled (before one, with tfar = inf, it is entered, as in exact arithmetic);
-//   hi - o < -24 u W: the far distance is < 0: culled.
+//   lo - o > 24 u W (27 u W for the compressed test): the near distance is > Tm >= any hit
+//            distance (a hit point lies within K on every axis), so once the ray has a hit the box is
+//            culled (before one, with tfar = inf, it is entered, as in exact arithmetic);
+//   hi - o < -24 u W (27 u W): the far distance is < 0: culled.
 // |P r0| <= W R0 = Tm / (4 u) and |c| stay finite for Tm <= 2^100; outside 2^-100 <= Tm <= 2^100,
 // for W = 0 and for R0 = inf the axis is left out as before (r = NaN). A denormal d also reads as
 // 0 here (DAZ); traced rays have none (structures/vec3.h).
