@@ -36,10 +36,10 @@
 // axis the ray does not move along (d = +-0) takes kernels.h's finite stand-in r0 = copysign(R0, d),
 // E0 = 4 Tm with Z = (K + |o|) R0 <= E0 / (16 u): the error above is then < 6.04 u Z + 4.02 u E0 <
 // 0.38 E0 against (D - o) r0, so near distances of boxes holding the ray's coordinate are < 0 and
-// far ones > 2 Tm (kernels.h has the argument; before session 41 such axes were left out). The bound (2E ~ 16 u (K + |o|) R between near and far, a few
-// float ulps of the scene's extent in t) also lets a ray into an unused slot (q_lo = 255 > q_hi =
-// 0) of a tiny node: such a slot references a real one-triangle leaf (structures/cwbvh.h), so it
-// costs a test.
+// far ones > 2 Tm (kernels.h has the argument; before session 41 such axes were left out). The
+// bound (2E ~ 16 u (K + |o|) R between near and far, a few float ulps of the scene's extent in t)
+// also lets a ray into an unused slot (q_lo = 255 > q_hi = 0) of a tiny node: such a slot
+// references a real one-triangle leaf (structures/cwbvh.h), so it costs a test.
 #pragma once
 #include <immintrin.h>
 

@@ -158,12 +158,12 @@ template <int L, bool kPadRcp>
 // passes larger factors kK, ko for K and |o|. An axis is left out (r = NaN, c = 0: every t of that
 // axis is NaN, which the NaN-skipping max/min of the node tests ignore — conservative) where R = 0
 // (|d| > 2^126), R or o is NaN, or E > 2^100 (so |P r|, |c| <= 2^123 stay finite), and where R = inf
-// (d = 0) has no stand-in (below). What it costs: along an axis the box grows by E / R ~ u (2 K + 3 |o|), a few float
-// ulps of the scene's coordinates, where Ize's pad grows the far distance by 6 u t; and a box with a
-// face in the plane of the closest hit (coplanar walls, spatial-split pieces of one floor) is
-// entered, where Ize's unpadded near distance ties with the hit and usually culls it: 2.6% more
-// leaves on stadium bounce:2 (docs/PERFORMANCE.md, session 13, also for a form with a relative pad
-// instead of K: fewer extra leaves, three more per-ray vectors, slower).
+// (d = 0) has no stand-in (below). What it costs: along an axis the box grows by E / R ~ u (2 K +
+// 3 |o|), a few float ulps of the scene's coordinates, where Ize's pad grows the far distance by
+// 6 u t; and a box with a face in the plane of the closest hit (coplanar walls, spatial-split
+// pieces of one floor) is entered, where Ize's unpadded near distance ties with the hit and
+// usually culls it: 2.6% more leaves on stadium bounce:2 (docs/PERFORMANCE.md, session 13, also for
+// a form with a relative pad instead of K: fewer extra leaves, three more per-ray vectors, slower).
 //
 // An axis the ray does not move along (d = +-0, so R = inf) is not left out (session 41: it was,
 // and then only the other axes culled: an axis-parallel ray entered every box its one moving axis
