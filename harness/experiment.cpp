@@ -250,8 +250,8 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
         set_interleaved_speed(rows[s], sec[s], sec[0], batch.size(), opt.schemes[0]);
         if (opt.cells) opt.cells->append(rows[s]);
         if (opt.progress)
-          std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %8s Mrays/s  %s x %s  mismatch %s\n", ++done, total,
-                       opt.schemes[s].c_str(), spec.name().c_str(), rows[s].get("mrays_median")->c_str(),
+          std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %16s  %s x %s  mismatch %s\n", ++done, total,
+                       opt.schemes[s].c_str(), spec.name().c_str(), speed_text(rows[s]).c_str(),
                        rows[s].get("speed_ratio_median")->c_str(), opt.schemes[0].c_str(),
                        rows[s].get("mismatch_rate")->c_str());
         out.push_back(std::move(rows[s]));
@@ -270,8 +270,8 @@ std::vector<Record> run_experiment(Bench& bench, const RunOptions& opt) {
       label_entry(r, name, opt, prepare_ms[s]);
       if (opt.cells) opt.cells->append(r);
       if (opt.progress)
-        std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %8s Mrays/s  mismatch %s\n", ++done, total,
-                     name.c_str(), spec.name().c_str(), r.get("mrays_median")->c_str(),
+        std::fprintf(stderr, "[%zu/%zu] %-16s %-14s %16s  mismatch %s\n", ++done, total,
+                     name.c_str(), spec.name().c_str(), speed_text(r).c_str(),
                      r.get("mismatch_rate")->c_str());
       out.push_back(std::move(r));
     }

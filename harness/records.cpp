@@ -214,6 +214,11 @@ std::string shown_value(const Record& r, const std::string& column) {
 }
 }  // namespace
 
+std::string speed_text(const Record& r) {
+  const std::string v = shown_value(r, "mrays_median");
+  return v == "no rays" ? v : v + " Mrays/s";
+}
+
 void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out) {
   std::vector<size_t> w(columns.size());
   for (size_t i = 0; i < columns.size(); ++i) {

@@ -47,5 +47,8 @@ void check_distinct_files(const std::vector<FileArg>& inputs, const std::vector<
 void write_sidecar(const std::string& csv_path, const nlohmann::json& meta);
 // Prints records as an aligned text table (the terminal view of a CSV).
 void print_table(const std::vector<Record>& records, const std::vector<std::string>& columns, FILE* out);
+// A row's speed for a progress line: "<mrays_median> Mrays/s", or "no rays" for a row that traced
+// none (as print_table shows it; the CSV keeps the 0 with `rays` = 0).
+std::string speed_text(const Record& r);
 
 }  // namespace tb

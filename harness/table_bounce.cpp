@@ -76,8 +76,8 @@ int bounce_table(const TableOptions& opt) {
       else r.set("thesis_mrays", "");
       thesis_rays.set_columns(r, "8", thesis_scheme8(scheme), dcol);
       if (opt.run.progress)
-        std::fprintf(stderr, "%-16s %-10s %9s Mrays/s (thesis %s)  rays/node %s  mismatch %s\n", name.c_str(),
-                     workloads[depth].c_str(), r.get("mrays_median")->c_str(), r.get("thesis_mrays")->c_str(),
+        std::fprintf(stderr, "%-16s %-10s %17s (thesis %s)  rays/node %s  mismatch %s\n", name.c_str(),
+                     workloads[depth].c_str(), speed_text(r).c_str(), r.get("thesis_mrays")->c_str(),
                      r.get("rays_per_node")->c_str(), r.get("mismatch_rate")->c_str());
       records.push_back(std::move(r));
     }

@@ -107,8 +107,8 @@ int raygrid_table(const TableOptions& opt) {
                               "depth" + std::to_string(k));
       raygrid_columns(r, *t);
       if (opt.run.progress)
-        std::fprintf(stderr, "%-14s bounce:%d %9s Mrays/s (thesis %s)  rays/node %s  rays/leaf %s  mismatch %s\n",
-                     name.c_str(), k, r.get("mrays_median")->c_str(), r.get("thesis_mrays")->c_str(),
+        std::fprintf(stderr, "%-14s bounce:%d %17s (thesis %s)  rays/node %s  rays/leaf %s  mismatch %s\n",
+                     name.c_str(), k, speed_text(r).c_str(), r.get("thesis_mrays")->c_str(),
                      r.get("rays_per_node")->c_str(), r.get("rays_per_leaf")->c_str(), r.get("mismatch_rate")->c_str());
       records.push_back(std::move(r));
     }

@@ -485,6 +485,22 @@ TEST(CLI, InterleavedRunWithoutRaysHasNoSpeedRatio) {
     empty += none;
   }
   EXPECT_EQ(empty, 2);
+  // The progress lines say "no rays" too, interleaved or not (they printed "0 Mrays/s").
+  const Result plain = travbench("run --scene sphere --schemes mbvh8_single,bvh_single --workloads bounce:1,bounce:2 "
+                                 "--width 32 --height 32 --reps 1 --csv " + (dir / "p.csv").string());
+  ASSERT_EQ(plain.code, 0) << plain.out;
+  for (const Result* run : {&r, &plain}) {
+    std::stringstream ss(run->out);
+    int said = 0;
+    for (std::string l; std::getline(ss, l);) {
+      if (l.find("_single ") == std::string::npos) continue;  // the progress lines of the two schemes
+      const bool none = l.find("bounce:2") != std::string::npos;
+      EXPECT_EQ(l.find("no rays") != std::string::npos, none) << l;
+      EXPECT_EQ(l.find("Mrays/s") != std::string::npos, !none) << l;
+      said += none;
+    }
+    EXPECT_EQ(said, 2) << run->out;
+  }
   std::filesystem::remove_all(dir);
 }
 
