@@ -3,6 +3,7 @@
 // kernel variants. Accuracy on every workload and the hard cases comes from test_schemes.cpp,
 // which iterates the registry.
 #include <algorithm>
+#include <bit>
 #include <random>
 
 #include "cachesim/hierarchy.h"
@@ -376,6 +377,44 @@ TEST(MBVH, FusedNodeTestIsConservative) {
               (unsigned long long)checked, (unsigned long long)entered_exact, (unsigned long long)unbounded_misses);
   EXPECT_GT(entered_exact, checked / 20) << "the rays should enter a fair share of the children";
   EXPECT_GT(unbounded_misses, 0u) << "no ray tested the bound: the unbounded formula never culled an entered child";
+}
+
+// push_sorted8 writes the entered children but the nearest far-to-near with their distances,
+// returns the nearest and gives the second nearest: the order of the keys (distance bits with the
+// child index in the low 3 bits, ties and denormal distances included), checked against a scalar
+// sort on every mask (session 42's 4-key variant for at most four children was checked so).
+TEST(MBVH, PushSorted8WritesTheEnteredChildrenFarToNear) {
+  enable_ftz_daz();
+  std::mt19937 rng(9);
+  for (int iter = 0; iter < 4096; ++iter) {
+    const uint32_t mask = uint32_t(iter) & 255u;
+    const int count = std::popcount(mask);
+    if (count == 0) continue;
+    alignas(32) float d[8];
+    alignas(32) uint32_t hitm[8], refs[8];
+    for (int i = 0; i < 8; ++i) {
+      const uint32_t k = rng() % 4;
+      d[i] = k == 0 ? 0.f : k == 1 ? 1e-39f : float(rng() % 16) * 0.5f;  // ties, zeros, denormals
+      hitm[i] = (mask >> i & 1) ? ~0u : 0u;
+      refs[i] = 1000u + uint32_t(i);
+    }
+    MBVHStackEntry out[8];
+    uint32_t second = 0;
+    const uint32_t nearest =
+        push_sorted8(_mm256_load_si256(reinterpret_cast<const __m256i*>(refs)), _mm256_load_ps(d),
+                     _mm256_load_ps(reinterpret_cast<const float*>(hitm)), count, out, &second);
+    std::vector<std::pair<uint32_t, int>> keys;  // the keys of sort_keys8 under DAZ: bits & ~7 | index
+    for (int i = 0; i < 8; ++i)
+      if (mask >> i & 1) keys.push_back({(std::bit_cast<uint32_t>(d[i]) & ~7u) | uint32_t(i), i});
+    std::sort(keys.begin(), keys.end());
+    EXPECT_EQ(nearest, refs[keys[0].second]) << "mask " << mask;
+    if (count >= 2) EXPECT_EQ(second, refs[keys[1].second]) << "mask " << mask;
+    for (int j = 0; j + 1 < count; ++j) {
+      const int child = keys[size_t(count - 1 - j)].second;
+      EXPECT_EQ(out[j].ref, refs[child]) << "mask " << mask << " entry " << j;
+      EXPECT_EQ(std::bit_cast<uint32_t>(out[j].dist), std::bit_cast<uint32_t>(d[child])) << "mask " << mask;
+    }
+  }
 }
 
 // The branch-free networks must return a permutation in ascending order, also when distances
